@@ -1,0 +1,1 @@
+"""Shared layer of balltrack: keys, messages, config, sessions, the service runner, the clock."""

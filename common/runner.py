@@ -1,0 +1,310 @@
+"""The service runner: everything a balltrack service does besides its own work.
+
+``run_service`` parses the shared options, loads the config (a bad one exits 2 with one
+line), opens the session, declares the liveliness token ``alive/<service>``, publishes
+``<service>/stats`` at 1 Hz, answers ``<service>/config`` (read, or change parameters live),
+and stops on SIGINT/SIGTERM by setting one event, closing the session explicitly, exit 0.
+
+A service module only says what it subscribes to and publishes::
+
+    def build(service: ServiceContext):
+        out = service.publisher(keys.DETECTED_BALL_3D, "Ball3D")
+        service.subscribe(keys.DETECTED_BALL, "Ball2D", lambda ball: out.put(...))
+
+    def main(argv=None):
+        return run_service("locator", LocatorConfig, build, argv, __doc__)
+"""
+
+import argparse
+import collections
+import logging
+import signal
+import sys
+import threading
+import time
+import traceback
+from typing import Any, Callable
+
+import numpy as np
+
+from common import keys as key_table
+from common.clock import SimClock, WallClock
+from common.config import ConfigError, config_to_dict, load_config, replace_config
+from common.keys import Keys
+from common.messages import MessageError, decode, encode
+from common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
+
+LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
+
+
+class RateLimitedLog:
+    """Logs a (key, kind) at most once per ``period`` seconds, counting what it held back."""
+
+    def __init__(self, logger: logging.Logger, period: float = 5.0):
+        self.logger = logger
+        self.period = period
+        self._last: dict[tuple, float] = {}
+        self._suppressed: collections.Counter = collections.Counter()
+        self._lock = threading.Lock()
+
+    def warning(self, key: str, reason: str) -> None:
+        kind = (key, reason.split(":")[0])
+        now = time.monotonic()
+        with self._lock:
+            if now - self._last.get(kind, -1e9) < self.period:
+                self._suppressed[kind] += 1
+                return
+            self._last[kind] = now
+            held_back = self._suppressed.pop(kind, 0)
+        suffix = f" ({held_back} similar suppressed)" if held_back else ""
+        self.logger.warning("rejected message on %s: %s%s", key, reason, suffix)
+
+
+class Stats:
+    """Counters and processing-time percentiles for ``<service>/stats``."""
+
+    def __init__(self, service: str):
+        self.service = service
+        self.received = self.published = self.rejected = self.dropped = 0
+        self._durations = collections.deque(maxlen=1000)
+        self._lock = threading.Lock()
+
+    def count(self, field: str, amount: int = 1) -> None:
+        with self._lock:
+            setattr(self, field, getattr(self, field) + amount)
+
+    def record_duration(self, seconds: float) -> None:
+        with self._lock:
+            self._durations.append(seconds * 1000.0)
+
+    def snapshot(self, stamp_ns: int) -> dict:
+        with self._lock:
+            durations = np.array(self._durations) if self._durations else np.zeros(1)
+            return {"service": self.service, "stamp": int(stamp_ns),
+                    "received": self.received, "published": self.published,
+                    "rejected": self.rejected, "dropped": self.dropped,
+                    "p50_ms": float(np.percentile(durations, 50)),
+                    "p99_ms": float(np.percentile(durations, 99))}
+
+
+class Publisher:
+    """Validates, encodes and counts; ``wanted`` tells whether anyone subscribes."""
+
+    def __init__(self, context: "ServiceContext", key: str, message: str, **options):
+        self._context = context
+        self.key = context.keys(key)
+        self.message = message
+        self._publisher = context.session.declare_publisher(self.key, **options)
+
+    @property
+    def wanted(self) -> bool:
+        return bool(self._publisher.matching_status)
+
+    def put(self, message: dict) -> None:
+        self._publisher.put(encode(self.message, message))
+        self._context.stats.count("published")
+
+
+class ServiceContext:
+    """What a service's ``build`` function uses: session, keys, config, stats, clock, stop."""
+
+    def __init__(self, name: str, session, namespace: str, config):
+        self.name = name
+        self.session = session
+        self.keys = Keys(namespace)
+        self.stats = Stats(name)
+        self.stop = threading.Event()
+        self.log = logging.getLogger(name)
+        self.rejections = RateLimitedLog(self.log)
+        self._config = config
+        self._config_listeners: list[Callable[[Any], None]] = []
+        self._declared: list = []
+        self.clock = SimClock() if getattr(config, "use_sim_time", False) else WallClock()
+        if isinstance(self.clock, SimClock):
+            self.subscribe(key_table.CLOCK, "Clock", lambda tick: self.clock.update(tick["stamp"]),
+                           count=False)
+
+    @property
+    def config(self):
+        return self._config
+
+    def on_config_change(self, listener: Callable[[Any], None]) -> None:
+        self._config_listeners.append(listener)
+
+    def set_config(self, changes: dict) -> Any:
+        new_config = replace_config(self._config, changes)
+        if getattr(new_config, "use_sim_time", None) != getattr(self._config, "use_sim_time", None):
+            raise ConfigError("use_sim_time: can only be set at start")
+        self._config = new_config
+        for listener in self._config_listeners:
+            listener(new_config)
+        return new_config
+
+    def publisher(self, key: str, message: str, **options) -> Publisher:
+        publisher = Publisher(self, key, message, **options)
+        self._declared.append(publisher._publisher)
+        return publisher
+
+    def reject(self, key: str, reason: str) -> None:
+        self.stats.count("rejected")
+        self.rejections.warning(key, reason)
+
+    def process(self, key: str, message_name: str, payload: bytes, handler, count: bool) -> None:
+        started = time.perf_counter()
+        try:
+            message = decode(message_name, payload)
+            handler(message)
+        except MessageError as error:
+            self.reject(key, str(error))
+            return
+        except Exception as error:  # a bug must not kill the service; it is logged loudly
+            self.reject(key, f"internal error: {error!r}")
+            self.log.debug("%s", traceback.format_exc())
+            return
+        if count:
+            self.stats.record_duration(time.perf_counter() - started)
+
+    def subscribe(self, key: str, message_name: str, handler: Callable[[dict], None],
+                  count: bool = True) -> None:
+        """Decode each sample on ``key`` as ``message_name`` and call ``handler`` in order."""
+        full_key = self.keys(key)
+
+        def on_sample(sample):
+            if count:
+                self.stats.count("received")
+            self.process(full_key, message_name, sample.payload.to_bytes(), handler, count)
+
+        self._declared.append(self.session.declare_subscriber(full_key, on_sample))
+
+    def subscribe_latest(self, key: str, message_name: str, handler: Callable[[dict], None]) -> None:
+        """Like ``subscribe`` but a worker thread serves only the newest sample: under
+        overload stale samples are dropped (counted in ``dropped``), never queued."""
+        full_key = self.keys(key)
+        slot: dict[str, bytes | None] = {"payload": None}
+        ready = threading.Condition()
+
+        def on_sample(sample):
+            payload = sample.payload.to_bytes()
+            self.stats.count("received")
+            with ready:
+                if slot["payload"] is not None:
+                    self.stats.count("dropped")
+                slot["payload"] = payload
+                ready.notify()
+
+        def worker():
+            while not self.stop.is_set():
+                with ready:
+                    ready.wait_for(lambda: slot["payload"] is not None or self.stop.is_set(), 0.2)
+                    payload, slot["payload"] = slot["payload"], None
+                if payload is not None:
+                    self.process(full_key, message_name, payload, handler, True)
+
+        threading.Thread(target=worker, name=f"{self.name}-{key}", daemon=True).start()
+        self._declared.append(self.session.declare_subscriber(full_key, on_sample))
+
+    def every(self, period: Callable[[], float], callback: Callable[[], None]) -> None:
+        """Call ``callback`` every ``period()`` seconds of the service's clock, in a thread."""
+
+        def loop():
+            next_tick = None
+            while not self.stop.is_set():
+                if isinstance(self.clock, SimClock):
+                    now = self.clock.wait_for_change(self.clock.now_ns(), 0.2)
+                    if not self.clock.has_time():
+                        continue
+                    now /= 1e9
+                else:
+                    now = time.monotonic()
+                if next_tick is None or now < next_tick - 10 * period():
+                    next_tick = now  # first tick, or the clock went back (simulation reset)
+                if now >= next_tick:
+                    try:
+                        callback()
+                    except Exception:
+                        self.log.error("timer callback failed:\n%s", traceback.format_exc())
+                    next_tick = max(next_tick + period(), now - period())
+                if not isinstance(self.clock, SimClock):
+                    self.stop.wait(max(0.0, next_tick - time.monotonic()))
+
+        threading.Thread(target=loop, name=f"{self.name}-timer", daemon=True).start()
+
+
+def _serve_config(context: ServiceContext, query) -> None:
+    try:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        request = decode("ConfigRequest", payload) if payload else {}
+        if request.get("set"):
+            context.set_config(request["set"])
+            context.log.info("config changed: %s", request["set"])
+        reply = {"ok": True, "config": config_to_dict(context.config)}
+    except (MessageError, ConfigError) as error:
+        reply = {"ok": False, "error": str(error)}
+    query.reply(query.key_expr, encode("ConfigReply", reply))
+
+
+def build_parser(name: str, description: str | None) -> argparse.ArgumentParser:
+    parser = ArgumentParser(prog=f"python -m services.{name}", description=description,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_session_arguments(parser)
+    parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return parser
+
+
+def run_service(name: str, config_class, build: Callable[[ServiceContext], Callable | None],
+                argv: list[str] | None = None, description: str | None = None) -> int:
+    """Run a service until SIGINT/SIGTERM. ``build`` declares its keys and may return a
+    blocking ``loop(context)`` to run in the main thread (it must return once ``stop`` is set)."""
+    parser = build_parser(name, description)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
+    try:
+        config = load_config(config_class, args.config, args.overrides, section=name)
+        Keys(args.namespace)
+    except (ConfigError, ValueError) as error:
+        print(f"{name}: {error}", file=sys.stderr)
+        return 2
+
+    try:
+        session = open_from_args(args)
+    except SessionOpenError as error:
+        print(f"{name}: {error}", file=sys.stderr)
+        return 1
+
+    context = ServiceContext(name, session, args.namespace, config)
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, lambda *_: context.stop.set())
+    status = 0
+    try:
+        loop = build(context)
+        stats_publisher = context.session.declare_publisher(context.keys(key_table.stats_key(name)))
+        context._declared.append(stats_publisher)
+        context._declared.append(context.session.declare_queryable(
+            context.keys(key_table.config_key(name)), lambda query: _serve_config(context, query)))
+        token = context.session.liveliness().declare_token(context.keys(key_table.alive_key(name)))
+
+        def publish_stats():
+            while not context.stop.wait(1.0):
+                stats_publisher.put(encode("Stats", context.stats.snapshot(time.time_ns())))
+
+        threading.Thread(target=publish_stats, name=f"{name}-stats", daemon=True).start()
+        context.log.info("running (namespace %r)", context.keys.namespace)
+        if loop is not None:
+            loop(context)
+        # A timed wait keeps the main thread responsive to signals on every platform.
+        while not context.stop.wait(0.5):
+            pass
+        token.undeclare()
+    except (ConfigError, ValueError) as error:
+        print(f"{name}: {error}", file=sys.stderr)
+        status = 2
+    finally:
+        context.stop.set()
+        for entity in reversed(context._declared):
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        session.close()
+    context.log.info("stopped")
+    return status

@@ -1,0 +1,115 @@
+"""Opening Zenoh sessions the same way in every process.
+
+Services are clients of a router (``tcp/127.0.0.1:7447`` unless ``--connect`` or the
+``BALLTRACK_CONNECT`` environment variable say otherwise). Multicast scouting is off so that
+only the routers named are joined: two test runs on one machine never discover each other,
+and peers never mesh around a router's access control. The reconnection period is short so
+a restarted router is rejoined in a fraction of a second.
+"""
+
+import argparse
+import json
+import os
+
+DEFAULT_PORT = 7447
+DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
+# How long a client waits for its router at start before giving up (seconds); -1 = forever.
+DEFAULT_OPEN_TIMEOUT = float(os.environ.get("BALLTRACK_OPEN_TIMEOUT", "30"))
+
+
+def default_endpoints() -> list[str]:
+    configured = os.environ.get("BALLTRACK_CONNECT", "")
+    return [item for item in configured.split(",") if item.strip()] or [DEFAULT_ENDPOINT]
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with a one-line error (the reason, not the usage block) and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
+def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = True) -> None:
+    """The options every service and command shares: --connect, --namespace, --config, --set."""
+    parser.add_argument("--connect", action="append", metavar="ENDPOINT", default=None,
+                        help=f"router endpoint, repeatable (default: {DEFAULT_ENDPOINT} "
+                             "or $BALLTRACK_CONNECT)")
+    parser.add_argument("--namespace", default=os.environ.get("BALLTRACK_NAMESPACE", ""),
+                        metavar="NS", help="key prefix, e.g. robot1 (default: none)")
+    parser.add_argument("--zenoh-config", default=None, metavar="FILE",
+                        help="a Zenoh json5 config file for the session (optional)")
+    if config_file:
+        parser.add_argument("--config", default=None, metavar="FILE", help="TOML parameter file")
+        parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                            dest="overrides", help="override a parameter, repeatable")
+
+
+def _insert(config, key: str, value) -> None:
+    config.insert_json5(key, json.dumps(value))
+
+
+def _common_settings(config) -> None:
+    _insert(config, "scouting/multicast/enabled", False)
+    _insert(config, "connect/retry", {"period_init_ms": 100, "period_max_ms": 500,
+                                      "period_increase_factor": 1.5})
+
+
+def client_config(endpoints: list[str] | None = None, zenoh_config_file: str | None = None,
+                  open_timeout: float | None = None):
+    import zenoh
+
+    config = zenoh.Config.from_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
+    if not zenoh_config_file:
+        _insert(config, "mode", "client")
+        _common_settings(config)
+    if endpoints or not zenoh_config_file:
+        _insert(config, "connect/endpoints", list(endpoints or default_endpoints()))
+    timeout = DEFAULT_OPEN_TIMEOUT if open_timeout is None else open_timeout
+    _insert(config, "connect/timeout_ms", -1 if timeout < 0 else int(timeout * 1000))
+    return config
+
+
+def router_config(listen: list[str], connect: list[str] | None = None,
+                  zenoh_config_file: str | None = None):
+    """A router listening on ``listen``; ``connect`` joins other routers (a cluster)."""
+    import zenoh
+
+    config = zenoh.Config.from_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
+    _insert(config, "mode", "router")
+    if not zenoh_config_file:
+        _common_settings(config)
+        # Routers keep retrying their peers forever, so a cluster heals after a restart.
+        _insert(config, "connect/timeout_ms", -1)
+    if listen:
+        _insert(config, "listen/endpoints", list(listen))
+    if connect:
+        _insert(config, "connect/endpoints", list(connect))
+    return config
+
+
+class SessionOpenError(RuntimeError):
+    pass
+
+
+def first_error_line(error: Exception) -> str:
+    """Zenoh's errors are multi-line and end with a source location; keep the reason."""
+    lines = str(error).strip().splitlines()
+    return lines[0].split(" at /")[0] if lines else type(error).__name__
+
+
+def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | None = None,
+                 open_timeout: float | None = None):
+    """Open a client session; SessionOpenError with a one-line reason if no router answers."""
+    import zenoh
+
+    config = client_config(endpoints, zenoh_config_file, open_timeout)
+    try:
+        return zenoh.open(config)
+    except Exception as error:  # zenoh raises ZError with a multi-line message
+        where = ", ".join(endpoints or default_endpoints())
+        first_line = first_error_line(error)
+        raise SessionOpenError(f"cannot reach a Zenoh router at {where}: {first_line}") from None
+
+
+def open_from_args(args, open_timeout: float | None = None):
+    return open_session(args.connect, getattr(args, "zenoh_config", None), open_timeout)

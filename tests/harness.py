@@ -1,0 +1,217 @@
+"""Real processes for integration tests: a router on a free port, services, and collectors.
+
+Nothing here sleeps to synchronise: every wait is on a condition (a log line, a liveliness
+token, a message) with a deadline, and fails the test with what it was waiting for.
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from common.keys import Keys
+from common.messages import decode, encode
+from common.session import open_session
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def process_environment() -> dict:
+    environment = dict(os.environ)
+    environment.setdefault("MUJOCO_GL", "egl")
+    environment["PYTHONPATH"] = str(REPO) + os.pathsep + environment.get("PYTHONPATH", "")
+    environment["PYTHONUNBUFFERED"] = "1"
+    return environment
+
+
+class Process:
+    """A child process whose combined output goes to a log file and can be waited on."""
+
+    def __init__(self, arguments: list[str], log_path: Path):
+        self.arguments = arguments
+        self.log_path = log_path
+        self._log = open(log_path, "wb")
+        self.popen = subprocess.Popen(arguments, stdout=self._log, stderr=subprocess.STDOUT,
+                                      stdin=subprocess.DEVNULL, env=process_environment(),
+                                      cwd=REPO)
+
+    def output(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def wait_for_output(self, text: str, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return
+            if self.popen.poll() is not None:
+                raise AssertionError(f"{self.arguments} exited {self.popen.returncode}:\n{self.output()}")
+            time.sleep(0.05)  # polling a file; the condition is the text, the deadline bounds it
+        raise AssertionError(f"no {text!r} from {self.arguments} in {timeout} s:\n{self.output()}")
+
+    def stop(self, timeout: float = 15.0) -> int:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait()
+                self._log.close()
+                raise AssertionError(f"{self.arguments} ignored SIGTERM for {timeout} s:\n{self.output()}")
+        self._log.close()
+        return self.popen.returncode
+
+    def kill(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.kill()
+            self.popen.wait()
+
+
+class Router:
+    def __init__(self, log_dir: Path, port: int | None = None):
+        self.port = port or free_port()
+        self.endpoint = f"tcp/127.0.0.1:{self.port}"
+        self.process = Process([sys.executable, "-m", "common.cli", "router", "--listen",
+                                self.endpoint], log_dir / f"router-{self.port}.log")
+        self.process.wait_for_output("listening on", 20)
+
+    def stop(self) -> int:
+        return self.process.stop()
+
+
+def start_service(name: str, endpoint: str, log_dir: Path, *extra: str) -> Process:
+    return Process([sys.executable, "-m", f"services.{name}", "--connect", endpoint, *extra],
+                   log_dir / f"{name}-{time.monotonic_ns()}.log")
+
+
+class Collector:
+    """Collects decoded messages of one key and waits for a condition on them."""
+
+    def __init__(self, session, key: str, message: str | None):
+        self.messages: list[dict] = []
+        self.rejected: list[str] = []
+        self._changed = threading.Condition()
+        self._message = message
+
+        def on_sample(sample):
+            payload = sample.payload.to_bytes()
+            with self._changed:
+                if self._message is None:
+                    self.messages.append({"key": str(sample.key_expr), "payload": payload})
+                else:
+                    try:
+                        self.messages.append(decode(self._message, payload))
+                    except ValueError as error:
+                        self.rejected.append(str(error))
+                self._changed.notify_all()
+
+        self.subscriber = session.declare_subscriber(key, on_sample)
+
+    def wait_for(self, predicate, timeout: float, what: str = "condition"):
+        """Wait until ``predicate(messages)`` is truthy; return its value."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while True:
+                result = predicate(self.messages)
+                if result:
+                    return result
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise AssertionError(f"timed out after {timeout} s waiting for {what}; "
+                                         f"{len(self.messages)} messages, last: "
+                                         f"{self.messages[-1] if self.messages else None}")
+                self._changed.wait(remaining)
+
+    def wait_count(self, count: int, timeout: float):
+        self.wait_for(lambda messages: len(messages) >= count, timeout, f"{count} messages")
+        return list(self.messages)
+
+    def close(self):
+        self.subscriber.undeclare()
+
+
+class Liveliness:
+    """Tracks ``alive/*`` tokens so a test can wait for a service to come up or go away."""
+
+    def __init__(self, session, namespace: str = ""):
+        self.keys = Keys(namespace)
+        self.alive: set[str] = set()
+        self._changed = threading.Condition()
+
+        def on_sample(sample):
+            name = self.keys.strip(str(sample.key_expr)).split("/", 1)[1]
+            with self._changed:
+                if sample.kind == zenoh.SampleKind.PUT:
+                    self.alive.add(name)
+                else:
+                    self.alive.discard(name)
+                self._changed.notify_all()
+
+        self.subscriber = session.liveliness().declare_subscriber(self.keys("alive/*"), on_sample,
+                                                                   history=True)
+
+    def wait(self, name: str, alive: bool = True, timeout: float = 30.0) -> None:
+        with self._changed:
+            if not self._changed.wait_for(lambda: (name in self.alive) == alive, timeout):
+                state = "alive" if alive else "gone"
+                raise AssertionError(f"{name} not {state} after {timeout} s (alive: {self.alive})")
+
+
+def query_config(session, service: str, changes: dict | None = None, namespace: str = "",
+                 timeout: float = 5.0) -> dict:
+    request = encode("ConfigRequest", {"set": changes} if changes else {})
+    for reply in session.get(Keys(namespace)(f"{service}/config"), payload=request, timeout=timeout):
+        if reply.ok is not None:
+            return decode("ConfigReply", reply.ok.payload.to_bytes())
+    raise AssertionError(f"{service}/config did not answer")
+
+
+def client(endpoint: str):
+    return open_session([endpoint], open_timeout=10)
+
+
+def garbage_payloads(good: dict) -> list[tuple[str, bytes]]:
+    """Every kind of bad input a subscriber must survive, derived from a good message."""
+    import msgpack
+
+    def pack(message):
+        return msgpack.packb(message, use_bin_type=True)
+
+    number_fields = [name for name, value in good.items()
+                     if isinstance(value, float) and name != "header"]
+    first_number = number_fields[0] if number_fields else None
+    cases = [
+        ("empty payload", b""),
+        ("not msgpack", b"\xc1\x00garbage\xff"),
+        ("a list, not a map", pack([1, 2, 3])),
+        ("missing fields", pack({"header": good.get("header")})),
+        ("wrong header type", pack({**good, "header": "yesterday"})),
+    ]
+    if first_number:
+        cases += [
+            ("NaN", pack({**good, first_number: float("nan")})),
+            ("inf", pack({**good, first_number: float("inf")})),
+            ("wrong type", pack({**good, first_number: "three"})),
+        ]
+    if "data" in good:
+        cases += [
+            ("data length disagrees", pack({**good, "data": good["data"][:-7]})),
+            ("claimed 100000 x 100000 frame", pack({**good, "width": 100000, "height": 100000})),
+            ("corrupt JPEG", pack({**good, "encoding": "jpeg", "data": b"\xff\xd8\xff\xe0" + bytes(64)})),
+            ("lying JPEG size", pack({**good, "encoding": "jpeg", "width": 50000, "height": 50000,
+                                      "data": b"\xff\xd8\xff\xc0\x00\x11\x08\xc3\x50\xc3\x50" + bytes(40)})),
+        ]
+    return cases

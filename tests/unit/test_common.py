@@ -1,0 +1,167 @@
+"""The shared layer: messages, keys, config, images."""
+
+import dataclasses
+import math
+
+import cv2
+import msgpack
+import numpy as np
+import pytest
+
+from common.clock import SimClock
+from common.config import ConfigError, load_config, parse_overrides, replace_config
+from common.images import bgr_to_message, image_to_bgr, jpeg_size
+from common.keys import Keys
+from common.messages import MessageError, decode, encode, header
+
+
+def ball2d(**changes):
+    message = {"header": header(5, 1), "x": 0.1, "y": -0.2, "z": 0.05, "u": 352.0, "v": 192.0,
+               "radius_px": 16.0, "image_width": 640, "image_height": 480, "score": 0.9}
+    message.update(changes)
+    return message
+
+
+def test_round_trip_keeps_fields_and_extras():
+    message = ball2d(extra_field="kept")
+    assert decode("Ball2D", encode("Ball2D", message)) == message
+
+
+@pytest.mark.parametrize("payload, reason", [
+    (b"", "empty payload"),
+    (b"\xc1\xc1\xc1", "not msgpack"),
+    (msgpack.packb([1, 2, 3]), "expected a map"),
+    (msgpack.packb({"x": 1}), "header: missing"),
+])
+def test_garbage_is_a_message_error(payload, reason):
+    with pytest.raises(MessageError, match=reason):
+        decode("Ball2D", payload)
+
+
+@pytest.mark.parametrize("field, value, reason", [
+    ("x", float("nan"), "not finite"),
+    ("x", float("inf"), "not finite"),
+    ("x", 3.0, "above"),
+    ("radius_px", "big", "expected a number"),
+    ("image_width", 1.5, "expected an integer"),
+    ("score", True, "expected a number"),
+])
+def test_bad_values_are_rejected(field, value, reason):
+    payload = msgpack.packb(ball2d(**{field: value}), use_bin_type=True)
+    with pytest.raises(MessageError, match=reason):
+        decode("Ball2D", payload)
+
+
+def image_message(**changes):
+    message = {"header": header(1, 1), "width": 4, "height": 2, "encoding": "bgr8",
+               "data": bytes(24)}
+    message.update(changes)
+    return msgpack.packb(message, use_bin_type=True)
+
+
+@pytest.mark.parametrize("changes, reason", [
+    ({"data": bytes(23)}, "needs 24"),
+    ({"width": 100000, "height": 100000}, "above"),
+    ({"encoding": "yuv422"}, "not one of"),
+    ({"encoding": "jpeg", "data": b"not a jpeg"}, "not a JPEG"),
+])
+def test_bad_images_are_rejected(changes, reason):
+    with pytest.raises(MessageError, match=reason):
+        decode("Image", image_message(**changes))
+
+
+def test_image_encodings_round_trip():
+    image = np.zeros((6, 8, 3), np.uint8)
+    image[:, :, 2] = 200  # red in BGR
+    for encoding in ("bgr8", "rgb8", "jpeg"):
+        message = decode("Image", encode("Image", bgr_to_message(image, 1, 2, encoding=encoding)))
+        decoded = image_to_bgr(message)
+        assert decoded.shape == image.shape
+        assert abs(int(decoded[3, 4, 2]) - 200) <= 3, encoding
+    mono = image_to_bgr(decode("Image", encode("Image", bgr_to_message(image, 1, 2, encoding="mono8"))))
+    assert mono.shape == (6, 8, 3)
+
+
+def test_corrupt_and_lying_jpegs_are_rejected_before_decoding():
+    ok, buffer = cv2.imencode(".jpg", np.zeros((20, 30, 3), np.uint8))
+    data = buffer.tobytes()
+    assert jpeg_size(data) == (30, 20)
+    lying = msgpack.packb({"header": header(1, 1), "width": 3000, "height": 2000,
+                           "encoding": "jpeg", "data": data}, use_bin_type=True)
+    with pytest.raises(MessageError, match="JPEG is 30x20"):
+        image_to_bgr(decode("Image", lying))
+    truncated = msgpack.packb({"header": header(1, 1), "width": 30, "height": 20,
+                               "encoding": "jpeg", "data": data[:40]}, use_bin_type=True)
+    with pytest.raises(MessageError, match="corrupt JPEG"):
+        image_to_bgr(decode("Image", truncated))
+
+
+def test_keys_namespace():
+    assert Keys("")("cmd_vel") == "cmd_vel"
+    assert Keys("/robot1/")("cmd_vel") == "robot1/cmd_vel"
+    assert Keys("robot1").strip("robot1/detected_ball") == "detected_ball"
+    assert Keys("robot1").message_of("robot1/detected_ball_3d") == "Ball3D"
+    assert Keys("").message_of("locator/stats") == "Stats"
+    with pytest.raises(ValueError, match="namespace"):
+        Keys("robot*")
+
+
+@dataclasses.dataclass
+class ExampleConfig:
+    gain: float = 0.5
+    count: int = 3
+    enabled: bool = True
+    name: str = "ball"
+    levels: list[float] = dataclasses.field(default_factory=lambda: [0.1, 0.2])
+
+    def __post_init__(self):
+        if not 0 <= self.gain <= 1:
+            raise ConfigError("gain: must be within [0, 1]")
+
+
+def test_config_file_then_overrides(tmp_path):
+    path = tmp_path / "example.toml"
+    path.write_text('gain = 0.25\nname = "from-file"\n[other]\ncount = 9\n')
+    config = load_config(ExampleConfig, path, ["count=7", "enabled=false", "levels=[0.5, 1]"])
+    assert (config.gain, config.count, config.enabled, config.name, config.levels) == \
+        (0.25, 7, False, "from-file", [0.5, 1.0])
+    assert load_config(ExampleConfig, path, section="other").count == 9
+
+
+@pytest.mark.parametrize("overrides, reason", [
+    (["gain=2"], "gain: must be within"),
+    (["gain=abc"], "gain:"),
+    (["gain=nan"], "gain: must be finite"),
+    (["count=1.5"], "count:"),
+    (["nonsense=1"], "nonsense: unknown parameter"),
+    (["gain"], "expected KEY=VALUE"),
+])
+def test_config_errors_name_the_key(overrides, reason):
+    with pytest.raises(ConfigError, match=reason):
+        load_config(ExampleConfig, None, overrides)
+
+
+def test_config_file_errors(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config(ExampleConfig, tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("gain = = 1")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(ExampleConfig, bad)
+
+
+def test_replace_config_validates_and_keeps_original():
+    config = ExampleConfig()
+    assert replace_config(config, {"gain": 0.75}).gain == 0.75
+    with pytest.raises(ConfigError):
+        replace_config(config, {"gain": 5})
+    assert config.gain == 0.5
+    assert parse_overrides(["a=1", " b = x=y "]) == {"a": "1", "b": "x=y"}
+
+
+def test_sim_clock_starts_at_zero_and_follows_updates():
+    clock = SimClock()
+    assert clock.now() == 0 and not clock.has_time()
+    clock.update(1_500_000_000)
+    assert math.isclose(clock.now(), 1.5) and clock.has_time()
+    assert clock.wait_for_change(0, 0.01) == 1_500_000_000
