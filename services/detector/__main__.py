@@ -1,0 +1,5 @@
+import sys
+
+from services.detector.service import main
+
+sys.exit(main())

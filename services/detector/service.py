@@ -1,0 +1,60 @@
+"""Detector service: camera frames -> balls (paper section 2.2).
+
+Subscribes: ``camera/image_raw`` (Image: bgr8, rgb8, mono8 or jpeg; any size). Only the newest
+frame is processed; frames that arrive while one is being processed replace each other and
+are counted in ``dropped`` (no queue builds up under overload).
+Publishes: ``detected_balls`` (Ball2DArray, every frame), ``detected_ball`` (Ball2D, the largest
+ball, on frames with one), and, only while someone subscribes to them, ``image_out`` (the frame
+with the detections drawn) and ``image_tuning`` (the colour mask).
+
+Example:
+    python -m services.detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
+"""
+
+from common import keys
+from common.images import bgr_to_message, image_to_bgr
+from common.runner import ServiceContext, run_service
+from services.detector.config import DetectorConfig
+from services.detector.pipeline import BallDetector, annotate
+
+
+def ball_fields(detection, width: int, height: int) -> dict:
+    """The contract's Ball2D fields of one detection (normalised x, y and apparent size z)."""
+    clip = lambda value: max(-1.0, min(1.0, value))  # noqa: E731 - a centre on the border edge
+    return {"x": clip((detection.u - width / 2) / (width / 2)),
+            "y": clip((detection.v - height / 2) / (height / 2)),
+            "z": 2.0 * detection.radius_px / width, "u": float(detection.u), "v": float(detection.v),
+            "radius_px": float(detection.radius_px), "image_width": width, "image_height": height,
+            "score": float(detection.score)}
+
+
+def build(service: ServiceContext):
+    largest = service.publisher(keys.DETECTED_BALL, "Ball2D")
+    every = service.publisher(keys.DETECTED_BALLS, "Ball2DArray")
+    annotated = service.publisher(keys.IMAGE_OUT, "Image")
+    tuning = service.publisher(keys.IMAGE_TUNING, "Image")
+    detector = {"core": BallDetector(service.config)}
+    service.on_config_change(lambda config: detector.update(core=BallDetector(config)))
+
+    def on_frame(frame: dict) -> None:
+        image = image_to_bgr(frame)
+        result = detector["core"].detect(image)
+        height, width = image.shape[:2]
+        header = frame["header"]
+        balls = [ball_fields(detection, width, height) for detection in result.detections]
+        every.put({"header": header, "balls": balls})
+        if balls:
+            largest.put({"header": header, **balls[0]})
+        if annotated.wanted:
+            annotated.put(bgr_to_message(annotate(image, result.detections), header["stamp"],
+                                         header["seq"], header["frame_id"]))
+        if tuning.wanted:
+            tuning.put(bgr_to_message(result.mask, header["stamp"], header["seq"],
+                                      header["frame_id"], encoding="mono8"))
+
+    service.subscribe_latest(keys.IMAGE_RAW, "Image", on_frame)
+    return None
+
+
+def main(argv=None) -> int:
+    return run_service("detector", DetectorConfig, build, argv, __doc__)

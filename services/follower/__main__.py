@@ -1,0 +1,5 @@
+import sys
+
+from services.follower.service import main
+
+sys.exit(main())

@@ -1,0 +1,50 @@
+"""Follower service: ``detected_ball`` -> ``cmd_vel`` (paper section 2.4, ROS2 follow_ball).
+
+Subscribes: ``detected_ball`` (Ball2D); ``clock`` (Clock) when ``use_sim_time`` is set.
+Publishes: ``cmd_vel`` (Twist) from a ``rate_hz`` timer (10 Hz) on the configured clock. While
+tracking, the header is the newest detection's (so latency from frame capture to command can
+be measured); while searching, it carries the current time.
+
+Example:
+    python -m services.follower --connect tcp/127.0.0.1:7447 --set max_size_thresh=0.3 --set use_sim_time=true
+"""
+
+import threading
+
+from common import keys
+from common.messages import MessageError
+from common.runner import ServiceContext, run_service
+from services.follower.config import FollowerConfig
+from services.follower.controller import SEARCH, FollowerController
+
+
+def build(service: ServiceContext):
+    output = service.publisher(keys.CMD_VEL, "Twist")
+    controller = FollowerController(service.config)
+    lock = threading.Lock()  # detections and the timer run on different threads
+    last_header = {"header": None}
+    service.on_config_change(lambda config: controller.update_config(config))
+
+    def on_ball(ball: dict) -> None:
+        with lock:
+            if not controller.on_detection(ball["x"], ball["z"], service.clock.now()):
+                raise MessageError("detection ignored: x or z out of range")
+            last_header["header"] = ball["header"]
+
+    def tick() -> None:
+        now_ns = service.clock.now_ns()
+        with lock:
+            command = controller.tick(now_ns / 1e9)
+            header = last_header["header"]
+        if command.mode == SEARCH or header is None:
+            header = {"stamp": now_ns, "frame_id": "base_link", "seq": header["seq"] if header else 0}
+        output.put({"header": {**header, "frame_id": "base_link"}, "mode": command.mode,
+                    "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]})
+
+    service.subscribe(keys.DETECTED_BALL, "Ball2D", on_ball)
+    service.every(lambda: 1.0 / service.config.rate_hz, tick)
+    return None
+
+
+def main(argv=None) -> int:
+    return run_service("follower", FollowerConfig, build, argv, __doc__)

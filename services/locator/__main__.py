@@ -1,0 +1,5 @@
+import sys
+
+from services.locator.service import main
+
+sys.exit(main())

@@ -1,0 +1,64 @@
+"""Locator service: ``detected_ball`` -> ``detected_ball_3d`` (paper section 2.3).
+
+Subscribes: ``detected_ball`` (Ball2D), ``camera/camera_info`` (CameraInfo, also queried once
+at start). Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header copied from
+the detection so end-to-end latency stays measurable).
+
+Example:
+    python -m services.locator --connect tcp/192.168.1.10:7447 --set ball_radius=0.033 --set mode=auto
+"""
+
+
+from common import keys
+from common.messages import MessageError
+from common.runner import ServiceContext, run_service
+from services.locator.config import LocatorConfig
+from services.locator.geometry import Intrinsics, faithful_v_fov, locate_exact, locate_faithful
+
+
+def build(service: ServiceContext):
+    output = service.publisher(keys.DETECTED_BALL_3D, "Ball3D")
+    camera: dict[str, Intrinsics] = {}
+
+    def on_camera_info(info: dict) -> None:
+        try:
+            camera["intrinsics"] = Intrinsics.from_camera_info(info)
+        except ValueError as error:
+            raise MessageError(str(error)) from None
+
+    def on_ball(ball: dict) -> None:
+        config = service.config
+        width, height = ball["image_width"], ball["image_height"]
+        intrinsics = camera.get("intrinsics")
+        matches = intrinsics is not None and (intrinsics.width, intrinsics.height) == (width, height)
+        try:
+            if config.resolved_mode(matches) == "exact" and matches:
+                position = locate_exact(ball["u"], ball["v"], ball["radius_px"], intrinsics,
+                                        config.ball_radius, config.circle_model)
+            else:
+                v_fov = intrinsics.v_fov if matches else faithful_v_fov(config.h_fov, width, height)
+                position = locate_faithful(ball["x"], ball["y"], ball["z"], config.h_fov, v_fov,
+                                           config.ball_radius)
+        except (ValueError, ZeroDivisionError) as error:
+            raise MessageError(f"cannot locate: {error}") from None
+        output.put({"header": {**ball["header"], "frame_id": "camera_optical"},
+                    "x": position.x, "y": position.y, "z": position.z,
+                    "distance": position.distance})
+
+    service.subscribe(keys.CAMERA_INFO, "CameraInfo", on_camera_info)
+    service.subscribe(keys.DETECTED_BALL, "Ball2D", on_ball)
+
+    def ask_camera_info() -> None:
+        # The simulator also answers camera_info as a query, so a locator started late need
+        # not wait up to a second for the next periodic message.
+        for reply in service.session.get(service.keys(keys.CAMERA_INFO), timeout=2.0):
+            if reply.ok is not None and "intrinsics" not in camera:
+                service.process(service.keys(keys.CAMERA_INFO), "CameraInfo",
+                                 reply.ok.payload.to_bytes(), on_camera_info, count=False)
+
+    service.start_thread(ask_camera_info, "locator-camera-info")
+    return None
+
+
+def main(argv=None) -> int:
+    return run_service("locator", LocatorConfig, build, argv, __doc__)

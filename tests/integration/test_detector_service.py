@@ -1,0 +1,113 @@
+"""The detector as a real process: drawn balls at known 3D positions in, balls out."""
+
+import math
+
+import pytest
+
+from common.images import bgr_to_message
+from common.messages import encode
+from services.locator.geometry import Intrinsics, project_sphere
+from tests.harness import (Collector, Liveliness, draw_ball, floor_image, garbage_payloads,
+                           query_config, start_service)
+
+WIDTH, HEIGHT = 640, 480
+INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
+POINTS = [(0.0, 0.05, 0.5), (0.3, 0.07, 1.0), (-0.5, 0.07, 1.5), (0.8, 0.0, 2.5)]
+
+
+def frame_with_ball(point, seq, encoding="bgr8"):
+    u, v, radius = project_sphere(point, 0.033, INTRINSICS)
+    image = draw_ball(floor_image(WIDTH, HEIGHT, seq), u, v, radius)
+    return encode("Image", bgr_to_message(image, 10_000 + seq, seq, "camera", encoding)), (u, v, radius)
+
+
+@pytest.fixture
+def detector(router, session, log_dir):
+    process = start_service("detector", router.endpoint, log_dir)
+    Liveliness(session).wait("detector", timeout=30)
+    yield process
+    assert process.stop() == 0, process.output()
+
+
+def publish_and_wait(session, collector, payload, seq, timeout=20):
+    session.put("camera/image_raw", payload)
+    return collector.wait_for(
+        lambda messages: [m for m in messages if m["header"]["seq"] == seq], timeout, f"seq {seq}")[0]
+
+
+@pytest.mark.parametrize("encoding", ["bgr8", "rgb8", "jpeg"])
+def test_balls_at_known_positions(session, detector, encoding):
+    largest = Collector(session, "detected_ball", "Ball2D")
+    for seq, point in enumerate(POINTS):
+        payload, (u, v, radius) = frame_with_ball(point, seq, encoding)
+        ball = publish_and_wait(session, largest, payload, seq)
+        # Tolerances: centre within 1.5 px, radius within 10% (JPEG adds blur at the edge).
+        assert math.hypot(ball["u"] - u, ball["v"] - v) < 1.5, (encoding, point)
+        assert abs(ball["radius_px"] - radius) < 0.1 * radius + 0.5, (encoding, point)
+        assert abs(ball["x"] - (u - WIDTH / 2) / (WIDTH / 2)) < 0.01
+        assert abs(ball["z"] - 2 * radius / WIDTH) < 0.01
+        assert ball["header"]["stamp"] == 10_000 + seq
+
+
+def test_every_frame_gets_detected_balls_even_without_a_ball(session, detector):
+    every = Collector(session, "detected_balls", "Ball2DArray")
+    empty = encode("Image", bgr_to_message(floor_image(320, 240, 5), 1, 77))
+    assert publish_and_wait(session, every, empty, 77)["balls"] == []
+    mono = encode("Image", bgr_to_message(floor_image(333, 211, 6), 1, 78, encoding="mono8"))
+    assert publish_and_wait(session, every, mono, 78)["balls"] == []
+
+
+def test_debug_images_only_while_subscribed(session, detector):
+    every = Collector(session, "detected_balls", "Ball2DArray")
+    stats = Collector(session, "detector/stats", "Stats")
+    for seq in range(3):
+        publish_and_wait(session, every, frame_with_ball(POINTS[1], seq)[0], seq)
+    # Without subscribers each frame publishes detected_balls and detected_ball only.
+    first = stats.wait_for(lambda m: [s for s in m if s["received"] >= 3], 5, "stats")[0]
+    assert first["published"] == 2 * first["received"]
+
+    annotated = Collector(session, "image_out", "Image")
+    mask = Collector(session, "image_tuning", "Image")
+    seq = 10
+    while not (annotated.messages and mask.messages):  # matching status reaches the detector asynchronously
+        publish_and_wait(session, every, frame_with_ball(POINTS[1], seq)[0], seq)
+        seq += 1
+        assert seq < 200, "image_out/image_tuning never published while subscribed"
+    assert annotated.messages[-1]["width"] == WIDTH and mask.messages[-1]["encoding"] == "mono8"
+
+
+def test_overload_drops_stale_frames_and_serves_the_newest(session, detector):
+    every = Collector(session, "detected_balls", "Ball2DArray")
+    stats = Collector(session, "detector/stats", "Stats")
+    payloads = [frame_with_ball(POINTS[seq % 4], seq)[0] for seq in range(60)]
+    for payload in payloads:
+        session.put("camera/image_raw", payload)
+    publish_and_wait(session, every, payloads[-1], 59)
+    served = [m["header"]["seq"] for m in every.messages]
+    assert served == sorted(served) and len(served) < 60
+    stats.wait_for(lambda m: m and m[-1]["dropped"] > 0 and
+                   m[-1]["dropped"] + len(served) == m[-1]["received"], 5, "dropped counted")
+
+
+def test_survives_bad_frames_and_live_config(session, detector):
+    every = Collector(session, "detected_balls", "Ball2DArray")
+    stats = Collector(session, "detector/stats", "Stats")
+    good, _ = frame_with_ball(POINTS[1], 1)
+    publish_and_wait(session, every, good, 1)
+    sample = bgr_to_message(floor_image(64, 48), 1, 2)
+    cases = garbage_payloads(sample)
+    for _, payload in cases:
+        session.put("camera/image_raw", payload)
+        # One at a time: with newest-only processing, bad frames could otherwise replace each other.
+        stats.wait_for(lambda m, n=len(stats.messages): len(m) > n, 5, "stats")
+    assert publish_and_wait(session, every, frame_with_ball(POINTS[2], 3)[0], 3)["balls"]
+    final = stats.wait_for(lambda m: [s for s in m if s["rejected"] + s["dropped"] >= len(cases)], 5,
+                           "rejections counted")[0]
+    assert final["rejected"] >= 1
+    assert "rejected message on camera/image_raw" in detector.output()
+
+    # Live change: a hue window that excludes yellow-green makes the ball disappear.
+    assert query_config(session, "detector", {"h_min": 100, "h_max": 120})["ok"]
+    assert publish_and_wait(session, every, frame_with_ball(POINTS[1], 4)[0], 4)["balls"] == []
+    reply = query_config(session, "detector", {"min_radius": -3})
+    assert not reply["ok"] and reply["error"].startswith("min_radius")

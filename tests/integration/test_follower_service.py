@@ -1,0 +1,99 @@
+"""The follower as a real process: detections in, cmd_vel out, on wall and simulated time."""
+
+import pytest
+
+from common.messages import encode, header
+from tests.harness import Collector, Liveliness, garbage_payloads, query_config, start_service
+
+
+def detection(x, z, seq):
+    return {"header": header(seq * 1000, seq), "x": x, "y": 0.0, "z": z, "u": 320 + 320 * x,
+            "v": 240.0, "radius_px": z * 320, "image_width": 640, "image_height": 480, "score": 1.0}
+
+
+@pytest.fixture
+def start_follower(router, session, log_dir):
+    started = []
+
+    def start(*overrides):
+        arguments = [item for override in overrides for item in ("--set", override)]
+        process = start_service("follower", router.endpoint, log_dir, *arguments)
+        started.append(process)
+        Liveliness(session).wait("follower", timeout=30)
+        return process
+
+    yield start
+    for process in started:
+        assert process.stop() == 0, process.output()
+
+
+def test_chase_arrive_then_search_on_wall_time(session, start_follower):
+    start_follower("rcv_timeout_secs=0.5")
+    commands = Collector(session, "cmd_vel", "Twist")
+    commands.wait_for(lambda m: m and m[-1]["mode"] == "search", 5, "search before any ball")
+    assert commands.messages[-1]["angular"][2] == pytest.approx(0.5)
+
+    session.put("detected_ball", encode("Ball2D", detection(0.4, 0.05, 1)))
+    chase = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 1], 5, "chase")[0]
+    # The first detection restarts the filter, so the command uses x itself: -0.7 * 0.4.
+    assert chase["angular"][2] == pytest.approx(-0.28)
+    assert chase["linear"][0] == pytest.approx(0.1)
+    assert chase["header"]["stamp"] == 1000  # capture time travels with the command
+
+    session.put("detected_ball", encode("Ball2D", detection(0.2, 0.5, 2)))
+    arrived = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 2], 5, "update")[0]
+    # Filtered size 0.9 * 0.05 + 0.1 * 0.5 = 0.095 < 0.1: still driving; x filtered to 0.38.
+    assert arrived["linear"][0] == pytest.approx(0.1)
+    assert arrived["angular"][2] == pytest.approx(-0.7 * 0.38)
+
+    lost = commands.wait_for(lambda m: [c for c in m if c["mode"] == "search" and
+                                        c["header"]["seq"] == 2], 5, "search after timeout")[0]
+    assert lost["linear"][0] == 0.0
+    # Last seen on the right (x > 0), so the search spins clockwise toward it.
+    assert lost["angular"][2] == pytest.approx(-0.5)
+
+
+def test_sim_time_drives_timer_and_timeout(session, start_follower):
+    start_follower("use_sim_time=true", "rcv_timeout_secs=1.0")
+    commands = Collector(session, "cmd_vel", "Twist")
+
+    def advance_to(seconds):
+        session.put("clock", encode("Clock", {"stamp": int(seconds * 1e9)}))
+
+    advance_to(1.0)
+    commands.wait_for(lambda m: m, 10, "first tick on simulated time")
+    session.put("detected_ball", encode("Ball2D", detection(-0.2, 0.05, 5)))
+    # Time stands still in simulation until the clock moves: no tick without a clock message.
+    step = 1.0
+    while not [c for c in commands.messages if c["header"]["seq"] == 5 and c["mode"] == "chase"]:
+        step += 0.1
+        advance_to(step)
+        commands.wait_for(lambda m, n=len(commands.messages): len(m) > n, 5, "tick")
+        assert step < 1.5, "no chase command after the detection"
+    advance_to(step + 0.5)   # 0.5 s of simulated time later: still fresh
+    fresh = commands.wait_for(lambda m: [c for c in m if c["header"]["stamp"] == 5000], 5, "fresh")
+    assert fresh[-1]["mode"] == "chase"
+    advance_to(step + 1.3)   # now older than rcv_timeout_secs in simulated time
+    commands.wait_for(lambda m: m[-1]["mode"] == "search" and
+                      m[-1]["header"]["stamp"] == int((step + 1.3) * 1e9), 5, "search on sim time")
+
+
+def test_bad_input_config_and_clean_exit(session, start_follower):
+    follower = start_follower()
+    commands = Collector(session, "cmd_vel", "Twist")
+    stats = Collector(session, "follower/stats", "Stats")
+    cases = garbage_payloads(detection(0.1, 0.05, 1))
+    for _, payload in cases:
+        session.put("detected_ball", payload)
+    session.put("detected_ball", encode("Ball2D", detection(0.5, 0.05, 9)))
+    chase = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 9], 5, "good after bad")
+    assert chase[0]["angular"][2] == pytest.approx(-0.35)
+    stats.wait_for(lambda m: m and m[-1]["rejected"] >= len(cases), 5, "rejections")
+
+    assert query_config(session, "follower", {"angular_chase_multiplier": 2.0})["ok"]
+    session.put("detected_ball", encode("Ball2D", detection(0.5, 0.05, 10)))
+    commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 10 and
+                                 c["angular"][2] == pytest.approx(-1.0)], 5, "new gain")
+    reply = query_config(session, "follower", {"filter_value": 1.5})
+    assert not reply["ok"] and reply["error"].startswith("filter_value")
+    assert not query_config(session, "follower", {"use_sim_time": True})["ok"]

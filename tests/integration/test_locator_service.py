@@ -1,0 +1,96 @@
+"""The locator as a real process over a real router."""
+
+import math
+
+import pytest
+
+from common.messages import encode, header
+from services.locator.geometry import Intrinsics, project_sphere
+from tests.harness import Collector, Liveliness, garbage_payloads, query_config, start_service
+
+WIDTH, HEIGHT, HFOV = 640, 480, 1.089
+INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, HFOV)
+CAMERA_INFO = {"header": header(0, 0), "width": WIDTH, "height": HEIGHT,
+               "fx": INTRINSICS.fx, "fy": INTRINSICS.fy, "cx": INTRINSICS.cx, "cy": INTRINSICS.cy,
+               "hfov": INTRINSICS.h_fov, "vfov": INTRINSICS.v_fov}
+
+
+def ball_message(point, seq, radius=0.033):
+    u, v, radius_px = project_sphere(point, radius, INTRINSICS)
+    return {"header": header(1_000_000 + seq, seq), "x": (u - WIDTH / 2) / (WIDTH / 2),
+            "y": (v - HEIGHT / 2) / (HEIGHT / 2), "z": 2 * radius_px / WIDTH, "u": u, "v": v,
+            "radius_px": radius_px, "image_width": WIDTH, "image_height": HEIGHT, "score": 1.0}
+
+
+@pytest.fixture
+def locator(router, session, log_dir):
+    process = start_service("locator", router.endpoint, log_dir)
+    Liveliness(session).wait("locator", timeout=30)
+    yield process
+    assert process.stop() == 0, process.output()
+
+
+def test_exact_positions_then_live_config_then_clean_exit(session, locator):
+    output = Collector(session, "detected_ball_3d", "Ball3D")
+    session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+    # Exact mode starts once CameraInfo is in; wait until a located ball shows it is.
+    points = [(0.0, 0.05, 0.3), (0.4, 0.1, 1.0), (-0.9, 0.05, 2.0), (1.5, -0.2, 3.5)]
+    for attempt in range(200):
+        session.put("detected_ball", encode("Ball2D", ball_message(points[0], attempt)))
+        try:
+            output.wait_for(lambda m: m and abs(m[-1]["z"] - 0.3) < 0.003, 0.1, "exact mode")
+            break
+        except AssertionError:
+            continue
+    start = len(output.messages)
+    for seq, point in enumerate(points, start=1000):
+        session.put("detected_ball", encode("Ball2D", ball_message(point, seq)))
+    output.wait_for(lambda m: len(m) - start >= len(points), 10, "4 positions")
+    located = output.messages[start:start + len(points)]
+    assert [position["header"]["seq"] for position in located] == [1000, 1001, 1002, 1003]
+    for point, position in zip(points, located):
+        truth = math.dist(point, (0, 0, 0))
+        assert position["header"]["frame_id"] == "camera_optical"
+        # Exact inverse of the projection: within 0.5% of distance, tolerances stated.
+        assert math.dist((position["x"], position["y"], position["z"]), point) < 0.005 * truth
+        assert abs(position["distance"] - truth) < 0.005 * truth
+
+    reply = query_config(session, "locator", {"ball_radius": 0.066})
+    assert reply["ok"] and reply["config"]["ball_radius"] == 0.066
+    start = len(output.messages)
+    session.put("detected_ball", encode("Ball2D", ball_message(points[1], 2000)))
+    moved = output.wait_for(lambda m: m[start:], 10, "position after config change")[0]
+    assert abs(moved["distance"] - 2 * math.dist(points[1], (0, 0, 0))) < 0.02
+
+    bad = query_config(session, "locator", {"ball_radius": -1})
+    assert not bad["ok"] and "ball_radius" in bad["error"]
+    assert query_config(session, "locator")["config"]["ball_radius"] == 0.066
+
+
+def test_faithful_mode_without_camera_info(session, locator):
+    output = Collector(session, "detected_ball_3d", "Ball3D")
+    message = ball_message((0.0, 0.0, 1.0), 7)
+    session.put("detected_ball", encode("Ball2D", message))
+    position = output.wait_count(1, 10)[0]
+    expected = 0.033 / math.tan(message["z"] * HFOV / 2)  # paper eq. 1-2
+    assert abs(position["distance"] - expected) < 1e-9
+    assert position["header"] == message["header"] | {"frame_id": "camera_optical"}
+
+
+def test_survives_every_kind_of_bad_input(session, locator):
+    output = Collector(session, "detected_ball_3d", "Ball3D")
+    stats = Collector(session, "locator/stats", "Stats")
+    good = ball_message((0.2, 0.0, 1.5), 1)
+    session.put("detected_ball", encode("Ball2D", good))
+    output.wait_count(1, 10)
+    cases = garbage_payloads(good) + garbage_payloads(CAMERA_INFO)
+    for label, payload in garbage_payloads(good):
+        session.put("detected_ball", payload)
+    for label, payload in garbage_payloads(CAMERA_INFO):
+        session.put("camera/camera_info", payload)
+    good_after = ball_message((0.2, 0.0, 1.5), 2)
+    session.put("detected_ball", encode("Ball2D", good_after))
+    output.wait_count(2, 10)
+    assert output.messages[1]["header"]["seq"] == 2
+    stats.wait_for(lambda m: m and m[-1]["rejected"] >= len(cases), 5, f"{len(cases)} rejected")
+    assert "rejected message on detected_ball" in locator.output()
