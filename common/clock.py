@@ -29,12 +29,14 @@ class SimClock:
 
     def __init__(self):
         self._stamp_ns = 0
+        self._updates = 0
         self._received = False
         self._changed = threading.Condition()
 
     def update(self, stamp_ns: int) -> None:
         with self._changed:
             self._stamp_ns = int(stamp_ns)
+            self._updates += 1
             self._received = True
             self._changed.notify_all()
 
@@ -47,11 +49,12 @@ class SimClock:
     def has_time(self) -> bool:
         return self._received
 
-    def wait_for_change(self, last_ns: int, timeout: float) -> int:
-        """Block until the clock differs from ``last_ns`` or ``timeout`` wall seconds pass."""
+    def wait_for_update(self, seen_updates: int, timeout: float) -> tuple[int, int]:
+        """Block until a clock message newer than update number ``seen_updates`` has arrived
+        (or ``timeout`` wall seconds pass); returns (update number, stamp in ns)."""
         with self._changed:
-            self._changed.wait_for(lambda: self._stamp_ns != last_ns, timeout)
-            return self._stamp_ns
+            self._changed.wait_for(lambda: self._updates != seen_updates, timeout)
+            return self._updates, self._stamp_ns
 
 
 def make_clock(use_sim_time: bool):

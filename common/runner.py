@@ -18,6 +18,7 @@ A service module only says what it subscribes to and publishes::
 import argparse
 import collections
 import logging
+import math
 import signal
 import sys
 import threading
@@ -98,7 +99,7 @@ class Publisher:
 
     @property
     def wanted(self) -> bool:
-        return bool(self._publisher.matching_status)
+        return self._publisher.matching_status.matching
 
     def put(self, message: dict) -> None:
         self._publisher.put(encode(self.message, message))
@@ -119,6 +120,7 @@ class ServiceContext:
         self._config = config
         self._config_listeners: list[Callable[[Any], None]] = []
         self._declared: list = []
+        self._threads: list[threading.Thread] = []
         self.clock = SimClock() if getattr(config, "use_sim_time", False) else WallClock()
         if isinstance(self.clock, SimClock):
             self.subscribe(key_table.CLOCK, "Clock", lambda tick: self.clock.update(tick["stamp"]),
@@ -200,34 +202,55 @@ class ServiceContext:
                 if payload is not None:
                     self.process(full_key, message_name, payload, handler, True)
 
-        threading.Thread(target=worker, name=f"{self.name}-{key}", daemon=True).start()
+        self.start_thread(worker, f"{self.name}-{key}")
         self._declared.append(self.session.declare_subscriber(full_key, on_sample))
 
+    def start_thread(self, target: Callable[[], None], name: str) -> None:
+        """A worker that must return soon after ``stop`` is set; joined before the session closes
+        (a thread still inside native code at interpreter exit aborts the process)."""
+        thread = threading.Thread(target=target, name=name, daemon=True)
+        self._threads.append(thread)
+        thread.start()
+
+    def join_threads(self, timeout: float = 5.0) -> None:
+        deadline = time.monotonic() + timeout
+        for thread in self._threads:
+            thread.join(max(0.0, deadline - time.monotonic()))
+
     def every(self, period: Callable[[], float], callback: Callable[[], None]) -> None:
-        """Call ``callback`` every ``period()`` seconds of the service's clock, in a thread."""
+        """Call ``callback`` every ``period()`` seconds of the service's clock, in a thread.
 
-        def loop():
-            next_tick = None
+        On simulated time the ticks fall on whole multiples of the period and happen when a
+        ``clock`` message crosses one, so a lockstep simulator knows which frames owe a tick."""
+
+        def run(callback):
+            try:
+                callback()
+            except Exception:
+                self.log.error("timer callback failed:\n%s", traceback.format_exc())
+
+        def sim_loop():
+            seen_updates, next_tick = 0, None
             while not self.stop.is_set():
-                if isinstance(self.clock, SimClock):
-                    now = self.clock.wait_for_change(self.clock.now_ns(), 0.2)
-                    if not self.clock.has_time():
-                        continue
-                    now /= 1e9
-                else:
-                    now = time.monotonic()
-                if next_tick is None or now < next_tick - 10 * period():
-                    next_tick = now  # first tick, or the clock went back (simulation reset)
-                if now >= next_tick:
-                    try:
-                        callback()
-                    except Exception:
-                        self.log.error("timer callback failed:\n%s", traceback.format_exc())
-                    next_tick = max(next_tick + period(), now - period())
-                if not isinstance(self.clock, SimClock):
-                    self.stop.wait(max(0.0, next_tick - time.monotonic()))
+                updates, now_ns = self.clock.wait_for_update(seen_updates, 0.2)
+                if updates == seen_updates:
+                    continue
+                seen_updates, now = updates, now_ns / 1e9
+                # Fire on the first clock, when a multiple of the period is crossed, and after
+                # the clock went back (a simulation reset).
+                if next_tick is None or now >= next_tick or now < next_tick - 2 * period():
+                    run(callback)
+                    next_tick = (math.floor(now / period() + 1e-9) + 1) * period()
 
-        threading.Thread(target=loop, name=f"{self.name}-timer", daemon=True).start()
+        def wall_loop():
+            next_tick = time.monotonic()
+            while not self.stop.is_set():
+                run(callback)
+                next_tick = max(next_tick + period(), time.monotonic() - period())
+                self.stop.wait(max(0.0, next_tick - time.monotonic()))
+
+        loop = sim_loop if isinstance(self.clock, SimClock) else wall_loop
+        self.start_thread(loop, f"{self.name}-timer")
 
 
 def _serve_config(context: ServiceContext, query) -> None:
@@ -287,7 +310,7 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
             while not context.stop.wait(1.0):
                 stats_publisher.put(encode("Stats", context.stats.snapshot(time.time_ns())))
 
-        threading.Thread(target=publish_stats, name=f"{name}-stats", daemon=True).start()
+        context.start_thread(publish_stats, f"{name}-stats")
         context.log.info("running (namespace %r)", context.keys.namespace)
         if loop is not None:
             loop(context)
@@ -300,6 +323,7 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
         status = 2
     finally:
         context.stop.set()
+        context.join_threads()
         for entity in reversed(context._declared):
             try:
                 entity.undeclare()

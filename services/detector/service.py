@@ -42,9 +42,11 @@ def build(service: ServiceContext):
         height, width = image.shape[:2]
         header = frame["header"]
         balls = [ball_fields(detection, width, height) for detection in result.detections]
-        every.put({"header": header, "balls": balls})
+        # detected_ball goes first: a lockstep simulator takes detected_balls as the frame's
+        # answer, so by then the follower has its detection ahead of the next clock tick.
         if balls:
             largest.put({"header": header, **balls[0]})
+        every.put({"header": header, "balls": balls})
         if annotated.wanted:
             annotated.put(bgr_to_message(annotate(image, result.detections), header["stamp"],
                                          header["seq"], header["frame_id"]))

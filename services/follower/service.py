@@ -38,7 +38,9 @@ def build(service: ServiceContext):
             header = last_header["header"]
         if command.mode == SEARCH or header is None:
             header = {"stamp": now_ns, "frame_id": "base_link", "seq": header["seq"] if header else 0}
-        output.put({"header": {**header, "frame_id": "base_link"}, "mode": command.mode,
+        # ``time`` (the clock at this tick) and ``mode`` are fields added to the contract's Twist:
+        # a lockstep simulator waits for the tick stamped with its frame time.
+        output.put({"header": {**header, "frame_id": "base_link"}, "time": now_ns, "mode": command.mode,
                     "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]})
 
     service.subscribe(keys.DETECTED_BALL, "Ball2D", on_ball)

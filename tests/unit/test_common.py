@@ -164,4 +164,5 @@ def test_sim_clock_starts_at_zero_and_follows_updates():
     assert clock.now() == 0 and not clock.has_time()
     clock.update(1_500_000_000)
     assert math.isclose(clock.now(), 1.5) and clock.has_time()
-    assert clock.wait_for_change(0, 0.01) == 1_500_000_000
+    assert clock.wait_for_update(0, 0.01) == (1, 1_500_000_000)
+    assert clock.wait_for_update(1, 0.01) == (1, 1_500_000_000)  # timed out: nothing new

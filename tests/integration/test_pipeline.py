@@ -1,0 +1,60 @@
+"""Detector, locator and follower together: drawn frames in, 3D positions and commands out."""
+
+import math
+
+import pytest
+
+from common.images import bgr_to_message
+from common.messages import encode, header
+from services.locator.geometry import Intrinsics, project_sphere
+from tests.harness import Collector, Liveliness, draw_ball, floor_image, start_service
+
+WIDTH, HEIGHT = 640, 480
+INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
+CAMERA_INFO = {"header": header(0, 0), "width": WIDTH, "height": HEIGHT, "fx": INTRINSICS.fx,
+               "fy": INTRINSICS.fy, "cx": INTRINSICS.cx, "cy": INTRINSICS.cy,
+               "hfov": INTRINSICS.h_fov, "vfov": INTRINSICS.v_fov}
+# Ball centres in the camera optical frame (x right, y down, z forward), a camera 0.1 m up.
+POINTS = [(0.0, 0.067, 0.4), (0.25, 0.067, 1.0), (-0.6, 0.067, 2.0), (0.5, 0.067, 3.0)]
+
+
+@pytest.fixture
+def pipeline(router, session, log_dir):
+    processes = [start_service(name, router.endpoint, log_dir)
+                 for name in ("detector", "locator", "follower")]
+    liveliness = Liveliness(session)
+    for name in ("detector", "locator", "follower"):
+        liveliness.wait(name, timeout=40)
+    yield processes
+    for process in processes:
+        assert process.stop() == 0, process.output()
+
+
+def test_frames_to_positions_and_commands(session, pipeline):
+    located = Collector(session, "detected_ball_3d", "Ball3D")
+    commands = Collector(session, "cmd_vel", "Twist")
+    session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+    for seq, point in enumerate(POINTS, start=1):
+        u, v, radius = project_sphere(point, 0.033, INTRINSICS)
+        image = draw_ball(floor_image(WIDTH, HEIGHT, seq), u, v, radius)
+        stamp = 1_000_000_000 * seq
+        # Repeat the frame until its 3D position arrives: the first may precede CameraInfo.
+        for attempt in range(50):
+            session.put("camera/image_raw", encode("Image", bgr_to_message(image, stamp, seq)))
+            try:
+                position = located.wait_for(
+                    lambda m: [x for x in m if x["header"]["seq"] == seq], 2, f"seq {seq}")[-1]
+                break
+            except AssertionError:
+                continue
+        truth = math.dist(point, (0, 0, 0))
+        # Stated tolerance: distance within 5%, position within 5% of the distance.
+        assert abs(position["distance"] - truth) < 0.05 * truth, (point, position)
+        assert math.dist((position["x"], position["y"], position["z"]), point) < 0.05 * truth
+        assert position["header"]["stamp"] == stamp
+        command = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == seq], 5,
+                                    f"command for seq {seq}")[-1]
+        # Turn toward the ball: negative angular velocity for a ball on the right.
+        if abs(point[0]) > 0.1:
+            assert math.copysign(1, command["angular"][2]) == -math.copysign(1, point[0])
+        assert command["header"]["stamp"] == stamp
