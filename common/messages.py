@@ -189,6 +189,11 @@ SCHEMAS: dict[str, Check] = {
         "received": integer(0), "published": integer(0),
         "rejected": integer(0), "dropped": integer(0),
         "p50_ms": number(0.0), "p99_ms": number(0.0),
+    }, {
+        # Added by the simulator: simulated seconds per wall second over the last ~5 s, frames
+        # so far, mean render time, frames or ticks that lockstep gave up waiting for.
+        "real_time_factor": number(0.0), "frames": integer(0), "render_ms": number(0.0),
+        "lockstep_timeouts": integer(0),
     }),
     # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes.
     "ConfigRequest": record({}, {"set": lambda value, path: record({})(value, path)}),

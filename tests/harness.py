@@ -215,3 +215,33 @@ def garbage_payloads(good: dict) -> list[tuple[str, bytes]]:
                                       "data": b"\xff\xd8\xff\xc0\x00\x11\x08\xc3\x50\xc3\x50" + bytes(40)})),
         ]
     return cases
+
+
+TENNIS_BGR = (40, 235, 205)  # yellow-green, as a tennis ball looks under white light
+
+
+def floor_image(width: int = 640, height: int = 480, seed: int = 0):
+    """A grey, slightly textured floor under a lighter wall: a plausible ball-free frame."""
+    import numpy as np
+
+    generator = np.random.default_rng(seed)
+    image = np.empty((height, width, 3), np.uint8)
+    image[: height // 2] = (170, 165, 160)
+    image[height // 2:] = (95, 100, 105)
+    noise = generator.normal(0, 4, image.shape)
+    return np.clip(image + noise, 0, 255).astype(np.uint8)
+
+
+def draw_ball(image, u: float, v: float, radius: float, colour=TENNIS_BGR):
+    """A shaded disc (lit from above-left) centred at (u, v), drawn with sub-pixel accuracy."""
+    import cv2
+    import numpy as np
+
+    height, width = image.shape[:2]
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    distance = np.hypot(xs - u, ys - v)
+    coverage = np.clip(radius + 0.5 - distance, 0.0, 1.0)[..., None]
+    shade = np.clip(1.05 - 0.35 * ((xs - u + ys - v) / max(radius, 1.0) + 1) / 2, 0.6, 1.0)[..., None]
+    ball = np.array(colour, np.float32)[None, None, :] * shade
+    blended = image.astype(np.float32) * (1 - coverage) + ball * coverage
+    return cv2.GaussianBlur(np.clip(blended, 0, 255).astype(np.uint8), (3, 3), 0)

@@ -1,0 +1,10 @@
+"""The simulator service: a MuJoCo world standing in for the paper's Gazebo scene.
+
+A small planar-base robot with a low forward camera, tennis balls (some scripted to move),
+distractors and a settable main light. The pure core is :mod:`services.simulator.sim`
+(``Simulation``); scenes are TOML files in ``services/simulator/scenarios/``.
+
+Example::
+
+    python -m services.simulator --set scenario=chase --set pacing=realtime
+"""

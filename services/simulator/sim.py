@@ -1,0 +1,620 @@
+"""The simulator's pure core: a MuJoCo world stepped one camera frame at a time (no Zenoh here).
+
+The service wiring drives it in a loop and does the pacing::
+
+    simulation = Simulation(config)                 # scenario from config.scenario
+    while running:
+        simulation.set_command(v, w, simulation.time)   # whenever a cmd_vel arrives
+        simulation.step_frame()                      # advance 1 / rate_hz simulated seconds
+        image = simulation.render()                  # H x W x 3 uint8, RGB
+        truth = simulation.ground_truth()            # robot pose, balls in world and camera
+        ... publish with stamp = simulation.stamp_ns, seq = simulation.frame_index ...
+    simulation.close()
+
+``handle_command`` serves the SimCommand query (reset, set_light, place_ball, place_robot).
+
+Conventions:
+
+* Camera optical frame: x right, y down, z forward (metres). Pixel coordinates follow OpenCV:
+  the centre of pixel (column i, row j) is (u, v) = (i, j). In that convention MuJoCo's
+  image centre is (cx, cy) = ((W - 1) / 2, (H - 1) / 2), measured by comparing the centroid of
+  a ball's segmentation mask with the analytic image of the sphere (agree within 0.05 px);
+  ``camera_info()`` reports those values, and fx = fy = (W / 2) / tan(hfov / 2).
+* Time is simulated seconds; it only moves forward, also across ``reset`` (a reset restarts
+  the scenario, scripted motion included, at the current time), so stamps stay monotonic.
+* Threads: every public method takes an internal lock, and the OpenGL (EGL) context is
+  released after each use, so the frame loop may run in one thread while another (a query
+  callback) calls ``handle_command``, and the simulation may be built in a third.
+* Determinism: the same config (seed included), scenario and sequence of calls give
+  bit-identical ground truth and images.
+"""
+
+import functools
+import json
+import math
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
+import numpy as np  # noqa: E402
+
+from common.config import ConfigError  # noqa: E402
+from services.simulator.config import SimulatorConfig  # noqa: E402
+from services.simulator.scenario import Scenario, load_scenario  # noqa: E402
+from services.simulator.world import (  # noqa: E402
+    CAMERA_NAME,
+    LIGHT_NAME,
+    ROBOT_JOINTS,
+    SPECULAR_PER_DIFFUSE,
+    VIEW_NAMES,
+    ball_body_name,
+    build_mjcf,
+    light_levels,
+    physics_substeps,
+)
+
+# Commands beyond these are not "fast", they are broken (wrong units, garbage): rejected.
+ABSURD_LINEAR = 100.0
+ABSURD_ANGULAR = 100.0
+# A ball this close to the camera plane (m) counts as not in front of it.
+MIN_VISIBLE_DEPTH = 1e-3
+COMMAND_OPS = ("reset", "set_light", "place_ball", "place_robot")
+
+
+def wrap_angle(angle: float) -> float:
+    """``angle`` wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _finite_number(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name}: must be finite, got {value!r}")
+    return number
+
+
+def _light_level(name: str, value: Any) -> tuple[float, float, float]:
+    """A grey level or an [r, g, b] list, each in [0, 1]."""
+    if isinstance(value, (list, tuple)):
+        if len(value) != 3:
+            raise ValueError(f"{name}: expected a number or [r, g, b], got {len(value)} values")
+        channels = tuple(_finite_number(f"{name}[{index}]", item)
+                         for index, item in enumerate(value))
+    else:
+        level = _finite_number(name, value)
+        channels = (level, level, level)
+    if any(not 0.0 <= channel <= 1.0 for channel in channels):
+        raise ValueError(f"{name}: values must be between 0 and 1, got {list(channels)}")
+    return channels
+
+
+def _release_gl_context() -> None:
+    """Unbind the calling thread's EGL context, so that the next render may come from any thread.
+
+    An EGL context can be current in one thread only; mujoco.Renderer makes its context
+    current on creation and on each render but never releases it.
+    """
+    if os.environ.get("MUJOCO_GL", "").lower() != "egl":
+        return
+    from mujoco import egl
+
+    if egl.EGL_DISPLAY is not None:
+        egl.EGL.eglMakeCurrent(egl.EGL_DISPLAY, egl.EGL.EGL_NO_SURFACE, egl.EGL.EGL_NO_SURFACE,
+                               egl.EGL.EGL_NO_CONTEXT)
+
+
+def _locked(method):
+    """Run ``method`` holding the simulation's lock (it may be called from several threads)."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return wrapper
+
+
+class Simulation:
+    """One simulated world: physics, the robot's camera, scripted balls, and the SimCommands."""
+
+    def __init__(self, config: SimulatorConfig, scenario: Scenario | None = None):
+        self.config = config
+        self._lock = threading.RLock()
+        self._model: mujoco.MjModel | None = None
+        self._renderer: mujoco.Renderer | None = None
+        self._frame_index = 0
+        self.wall_time: float | None = None
+        self.command_count = 0
+        self._load(scenario if scenario is not None else load_scenario(config.scenario), 0.0)
+        self._restart()
+
+    # -- construction -------------------------------------------------------------------------
+
+    def _load(self, scenario: Scenario, start_time: float) -> None:
+        """Build model, data and renderer for ``scenario`` (the only place they are created)."""
+        config = self.config
+        model = mujoco.MjModel.from_xml_string(build_mjcf(scenario, config))
+        data = mujoco.MjData(model)
+        renderer = mujoco.Renderer(model, config.height, config.width)
+        _release_gl_context()
+        if self._renderer is not None:
+            self._renderer.close()
+        self.scenario = scenario
+        self._model = model
+        self._data = data
+        self._renderer = renderer
+        self._data.time = start_time
+        self._substeps = physics_substeps(config)
+        self._camera_id = model.camera(CAMERA_NAME).id
+        self._light_id = model.light(LIGHT_NAME).id
+        self._qpos_index = [int(model.joint(name).qposadr[0]) for name in ROBOT_JOINTS]
+        self._qvel_index = [int(model.joint(name).dofadr[0]) for name in ROBOT_JOINTS]
+        self._ball_mocap = [int(model.body(ball_body_name(index)).mocapid[0])
+                            for index in range(len(scenario.balls))]
+        self._ball_geoms = [model.geom(ball_body_name(index)).id
+                            for index in range(len(scenario.balls))]
+        self._default_light = light_levels(config, scenario)
+
+    def _restart(self) -> None:
+        """Put the current scenario back to its start state, keeping the clock running."""
+        now = self._data.time
+        mujoco.mj_resetData(self._model, self._data)
+        self._data.time = now
+        self._motion_start = now
+        start = self.scenario.robot
+        qpos = self._data.qpos
+        qpos[self._qpos_index[0]], qpos[self._qpos_index[1]], qpos[self._qpos_index[2]] = (
+            start.x, start.y, start.yaw)
+        self._scripted = [ball.motion is not None for ball in self.scenario.balls]
+        self._ball_positions = [tuple(ball.position) for ball in self.scenario.balls]
+        self._command_linear = 0.0
+        self._command_angular = 0.0
+        self._command_time = -math.inf
+        self._linear = 0.0
+        self._angular = 0.0
+        self._apply_light(*self._default_light)
+        self._rng = np.random.default_rng(self.config.seed)
+        self._update_balls()
+        mujoco.mj_forward(self._model, self._data)
+
+    @_locked
+    def close(self) -> None:
+        """Free the renderer (and its OpenGL context). Safe to call twice."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self) -> "Simulation":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    # -- time ---------------------------------------------------------------------------------
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds since construction."""
+        return float(self._data.time)
+
+    @property
+    def stamp_ns(self) -> int:
+        """``time`` as integer nanoseconds, the stamp of the frame rendered now."""
+        return int(round(self._data.time * 1e9))
+
+    @property
+    def frame_index(self) -> int:
+        """Frames stepped so far (the seq of the current frame)."""
+        return self._frame_index
+
+    @property
+    def period(self) -> float:
+        return self.config.period
+
+    # -- commands -----------------------------------------------------------------------------
+
+    @_locked
+    def set_command(self, linear: float, angular: float, sim_time: float | None = None) -> None:
+        """Command body-frame velocities (m/s, rad/s), received at simulated time ``sim_time``.
+
+        Non-numbers, non-finite and absurd values raise ValueError and leave the command as it
+        was; other values are clamped to max_linear / max_angular. The command holds until the
+        next one, or until cmd_timeout simulated seconds pass without one (safety stop).
+        """
+        linear = _finite_number("linear", linear)
+        angular = _finite_number("angular", angular)
+        stamp = self.time if sim_time is None else _finite_number("sim_time", sim_time)
+        if abs(linear) > ABSURD_LINEAR:
+            raise ValueError(f"linear: {linear:g} m/s is not a plausible command")
+        if abs(angular) > ABSURD_ANGULAR:
+            raise ValueError(f"angular: {angular:g} rad/s is not a plausible command")
+        limit_linear = self.config.max_linear
+        limit_angular = self.config.max_angular
+        self._command_linear = min(max(linear, -limit_linear), limit_linear)
+        self._command_angular = min(max(angular, -limit_angular), limit_angular)
+        self._command_time = stamp
+        self.command_count += 1
+
+    @_locked
+    def commanded_velocity(self) -> tuple[float, float]:
+        """The (linear, angular) target now: the clamped command, or zeros after a timeout."""
+        if self._data.time - self._command_time > self.config.cmd_timeout:
+            return 0.0, 0.0
+        return self._command_linear, self._command_angular
+
+    @_locked
+    def robot_velocity(self) -> tuple[float, float]:
+        """The (linear, angular) velocity being applied, after the acceleration limits."""
+        return self._linear, self._angular
+
+    @property
+    def safety_stopped(self) -> bool:
+        """True while no command arrived within cmd_timeout (the robot is told to stop)."""
+        return self._data.time - self._command_time > self.config.cmd_timeout
+
+    # -- stepping -----------------------------------------------------------------------------
+
+    @_locked
+    def step_frame(self, now_wall: float | None = None) -> float:
+        """Advance one camera period (1 / rate_hz simulated seconds); returns the new time.
+
+        ``now_wall`` is the wall-clock time of the call, kept in ``wall_time`` for recordings.
+        """
+        model, data = self._model, self._data
+        config = self.config
+        dt = model.opt.timestep
+        linear_step = config.max_linear_accel * dt
+        angular_step = config.max_angular_accel * dt
+        limit = self.scenario.robot_limit
+        qx, qy, qyaw = self._qpos_index
+        vx, vy, _ = self._qvel_index
+        for _ in range(self._substeps):
+            target_linear, target_angular = self.commanded_velocity()
+            self._linear += min(max(target_linear - self._linear, -linear_step), linear_step)
+            self._angular += min(max(target_angular - self._angular, -angular_step), angular_step)
+            yaw = data.qpos[qyaw]
+            # Body-frame command -> world-frame velocities for the planar base's actuators.
+            data.ctrl[0] = self._linear * math.cos(yaw)
+            data.ctrl[1] = self._linear * math.sin(yaw)
+            data.ctrl[2] = self._angular
+            mujoco.mj_step(model, data)
+            # The robot never leaves the world: stop it at the edge.
+            for position_index, velocity_index in ((qx, vx), (qy, vy)):
+                if abs(data.qpos[position_index]) > limit:
+                    data.qpos[position_index] = math.copysign(limit, data.qpos[position_index])
+                    data.qvel[velocity_index] = 0.0
+        self._frame_index += 1
+        self.wall_time = now_wall
+        self._update_balls()
+        # mj_step leaves derived quantities (camera pose) one step behind qpos: recompute.
+        mujoco.mj_forward(model, data)
+        return self.time
+
+    def _update_balls(self) -> None:
+        elapsed = self._data.time - self._motion_start
+        for index, ball in enumerate(self.scenario.balls):
+            if self._scripted[index]:
+                self._ball_positions[index] = ball.position_at(elapsed)
+            self._data.mocap_pos[self._ball_mocap[index]] = self._ball_positions[index]
+
+    # -- camera -------------------------------------------------------------------------------
+
+    def camera_info(self) -> dict[str, Any]:
+        """Pinhole intrinsics of the rendered images (OpenCV pixel convention, see module doc)."""
+        width, height = self.config.width, self.config.height
+        focal = (width / 2) / math.tan(self.config.hfov / 2)
+        return {
+            "width": width,
+            "height": height,
+            "fx": focal,
+            "fy": focal,
+            "cx": (width - 1) / 2,
+            "cy": (height - 1) / 2,
+            "hfov": self.config.hfov,
+            "vfov": self.config.vfov,
+        }
+
+    @_locked
+    def render(self) -> np.ndarray:
+        """The camera image now: H x W x 3 uint8, RGB (plus seeded noise if image_noise > 0)."""
+        renderer = self._live_renderer()
+        renderer.update_scene(self._data, self._camera_id)
+        try:
+            image = renderer.render()
+        finally:
+            _release_gl_context()
+        if self.config.image_noise > 0:
+            noise = self._rng.normal(0.0, self.config.image_noise, image.shape)
+            image = np.clip(image + noise, 0, 255).astype(np.uint8)
+        return image
+
+    @_locked
+    def render_view(self, view: str = "follow") -> np.ndarray:
+        """An RGB picture for people: "follow" (behind the robot), "top" (the whole world from
+        above) or "front" (the robot's camera, without noise); same size as the camera image."""
+        if view not in VIEW_NAMES:
+            raise ValueError(f"view: must be one of {', '.join(VIEW_NAMES)}, got {view!r}")
+        renderer = self._live_renderer()
+        renderer.update_scene(self._data, self._model.camera(view).id)
+        try:
+            return renderer.render()
+        finally:
+            _release_gl_context()
+
+    @_locked
+    def ball_masks(self) -> dict[str, np.ndarray]:
+        """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
+        renderer = self._live_renderer()
+        renderer.enable_segmentation_rendering()
+        try:
+            renderer.update_scene(self._data, self._camera_id)
+            segmentation = renderer.render()
+        finally:
+            renderer.disable_segmentation_rendering()
+            _release_gl_context()
+        is_geom = segmentation[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
+        return {ball.id: is_geom & (segmentation[..., 0] == geom_id)
+                for ball, geom_id in zip(self.scenario.balls, self._ball_geoms)}
+
+    def _live_renderer(self) -> mujoco.Renderer:
+        if self._renderer is None:
+            raise RuntimeError("the simulation is closed")
+        return self._renderer
+
+    @_locked
+    def world_to_camera(self, point) -> np.ndarray:
+        """A world point in the camera optical frame (x right, y down, z forward)."""
+        rotation = self._data.cam_xmat[self._camera_id].reshape(3, 3)
+        local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[self._camera_id])
+        # MuJoCo cameras look along -z with y up; the optical frame looks along +z with y down.
+        return np.array([local[0], -local[1], -local[2]])
+
+    def project(self, point_in_camera) -> tuple[float, float] | None:
+        """Pixel (u, v) of an optical-frame point, or None when it is not in front."""
+        x, y, z = point_in_camera
+        if z <= MIN_VISIBLE_DEPTH:
+            return None
+        info = self.camera_info()
+        return info["cx"] + info["fx"] * x / z, info["cy"] + info["fy"] * y / z
+
+    # -- ground truth -------------------------------------------------------------------------
+
+    @_locked
+    def robot_pose(self) -> tuple[float, float, float]:
+        qx, qy, qyaw = self._qpos_index
+        qpos = self._data.qpos
+        return float(qpos[qx]), float(qpos[qy]), wrap_angle(float(qpos[qyaw]))
+
+    @_locked
+    def ground_truth(self) -> dict[str, Any]:
+        """The GroundTruth message body: robot pose and every ball in world and camera frames.
+
+        A ball is ``visible`` when its centre is in front of the camera and projects inside
+        the image (occlusion is not considered; ``ball_masks`` gives the pixels really seen).
+        """
+        x, y, yaw = self.robot_pose()
+        width, height = self.config.width, self.config.height
+        balls = []
+        for ball, position in zip(self.scenario.balls, self._ball_positions):
+            in_camera = self.world_to_camera(position)
+            pixel = self.project(in_camera)
+            visible = (pixel is not None and -0.5 <= pixel[0] <= width - 0.5
+                       and -0.5 <= pixel[1] <= height - 0.5)
+            balls.append({
+                "id": ball.id,
+                "radius": float(ball.radius),
+                "position": [float(value) for value in position],
+                "in_camera": [float(value) for value in in_camera],
+                "visible": bool(visible),
+            })
+        return {"robot": {"x": x, "y": y, "yaw": yaw}, "balls": balls}
+
+    # -- SimCommands --------------------------------------------------------------------------
+
+    @_locked
+    def handle_command(self, request: Any) -> dict[str, Any]:
+        """Serve one SimCommand; returns {"ok": True} or {"ok": False, "error": ...}.
+
+        A bad request (unknown op or argument, wrong type, out of range, unknown ball or
+        scenario) changes nothing: every argument is validated before anything is applied.
+        """
+        try:
+            if not isinstance(request, dict):
+                raise ValueError(f"expected a map with an 'op', got {type(request).__name__}")
+            op = request.get("op")
+            if op not in COMMAND_OPS:
+                raise ValueError(f"op: must be one of {', '.join(COMMAND_OPS)}, got {op!r}")
+            arguments = {key: value for key, value in request.items() if key != "op"}
+            allowed = {"reset": {"scenario"}, "set_light": {"diffuse", "ambient"},
+                       "place_ball": {"id", "position"}, "place_robot": {"x", "y", "yaw"}}[op]
+            unknown = sorted(set(arguments) - allowed)
+            if unknown:
+                raise ValueError(f"{op}: unknown argument {unknown[0]!r} "
+                                 f"(allowed: {', '.join(sorted(allowed))})")
+            getattr(self, op)(**arguments)
+        except (ValueError, TypeError, KeyError) as error:
+            return {"ok": False, "error": str(error)}
+        return {"ok": True}
+
+    @_locked
+    def reset(self, scenario: str | None = None) -> None:
+        """Restart the current scenario, or load the named one; the clock keeps running.
+
+        Light changes, placed balls and robot moves are undone; the command is cleared.
+        """
+        if scenario is not None:
+            if not isinstance(scenario, str) or not scenario.strip():
+                raise ValueError(f"scenario: expected a scenario name, got {scenario!r}")
+            loaded = load_scenario(scenario)  # ConfigError (a ValueError) if bad: nothing changed
+            self._load(loaded, self._data.time)
+        self._restart()
+
+    @_locked
+    def set_light(self, diffuse: Any = None, ambient: Any = None) -> None:
+        """Set the main light's diffuse and/or the ambient level: a grey level or [r, g, b]."""
+        if diffuse is None and ambient is None:
+            raise ValueError("set_light: give diffuse and/or ambient")
+        model = self._model
+        new_diffuse = (_light_level("diffuse", diffuse) if diffuse is not None
+                       else tuple(float(value) for value in model.light_diffuse[self._light_id]))
+        new_ambient = (_light_level("ambient", ambient) if ambient is not None
+                       else tuple(float(value) for value in model.light_ambient[self._light_id]))
+        self._apply_light(new_diffuse, new_ambient)
+
+    def _apply_light(self, diffuse, ambient) -> None:
+        model = self._model
+        model.light_diffuse[self._light_id] = diffuse
+        model.light_specular[self._light_id] = [SPECULAR_PER_DIFFUSE * level for level in diffuse]
+        model.light_ambient[self._light_id] = ambient
+
+    @_locked
+    def light(self) -> dict[str, list[float]]:
+        """The main light's current diffuse and ambient RGB."""
+        return {"diffuse": [float(value) for value in self._model.light_diffuse[self._light_id]],
+                "ambient": [float(value) for value in self._model.light_ambient[self._light_id]]}
+
+    @_locked
+    def place_ball(self, id: Any = None, position: Any = None) -> None:
+        """Move ball ``id`` to [x, y] (resting on the floor) or [x, y, z]; stops its script."""
+        if id is None:
+            raise ValueError("place_ball: missing 'id'")
+        ids = [ball.id for ball in self.scenario.balls]
+        if str(id) not in ids or isinstance(id, bool):
+            raise ValueError(f"id: no ball {id!r} (balls: {', '.join(ids) or 'none'})")
+        index = ids.index(str(id))
+        ball = self.scenario.balls[index]
+        if not isinstance(position, (list, tuple)) or len(position) not in (2, 3):
+            raise ValueError(f"position: expected [x, y] or [x, y, z], got {position!r}")
+        values = [_finite_number(f"position[{axis}]", value) for axis, value in enumerate(position)]
+        limit = self.scenario.half_size - ball.radius
+        if abs(values[0]) > limit or abs(values[1]) > limit:
+            raise ValueError(f"position: ({values[0]:g}, {values[1]:g}) is outside the world "
+                             f"(|x|, |y| must be <= {limit:g})")
+        if len(values) == 2:
+            values.append(ball.radius)
+        if not 0.0 <= values[2] <= 10.0:
+            raise ValueError(f"position: z must be between 0 and 10 m, got {values[2]:g}")
+        self._scripted[index] = False
+        self._ball_positions[index] = tuple(values)
+        self._update_balls()
+        mujoco.mj_forward(self._model, self._data)
+
+    @_locked
+    def place_robot(self, x: Any = None, y: Any = None, yaw: Any = None) -> None:
+        """Teleport the robot to (x, y) and heading yaw (default: keep), standing still."""
+        if x is None or y is None:
+            raise ValueError("place_robot: 'x' and 'y' are required")
+        new_x = _finite_number("x", x)
+        new_y = _finite_number("y", y)
+        new_yaw = self.robot_pose()[2] if yaw is None else _finite_number("yaw", yaw)
+        limit = self.scenario.robot_limit
+        if abs(new_x) > limit or abs(new_y) > limit:
+            raise ValueError(f"x, y: ({new_x:g}, {new_y:g}) is outside the world "
+                             f"(|x|, |y| must be <= {limit:g})")
+        qx, qy, qyaw = self._qpos_index
+        self._data.qpos[qx], self._data.qpos[qy], self._data.qpos[qyaw] = new_x, new_y, new_yaw
+        self._data.qvel[self._qvel_index] = 0.0
+        self._linear = 0.0
+        self._angular = 0.0
+        mujoco.mj_forward(self._model, self._data)
+
+
+class Recorder:
+    """Writes rendered frames to a video file and ground truth to a JSON-lines file (optional)."""
+
+    def __init__(self, video_path: str, ground_truth_path: str, rate_hz: float,
+                 width: int, height: int):
+        import cv2  # only needed when recording
+
+        self._cv2 = cv2
+        self._video = None
+        self._log = None
+        if video_path:
+            fourcc = "MJPG" if video_path.lower().endswith(".avi") else "mp4v"
+            Path(video_path).parent.mkdir(parents=True, exist_ok=True)
+            self._video = cv2.VideoWriter(video_path, cv2.VideoWriter_fourcc(*fourcc),
+                                          rate_hz, (width, height))
+            if not self._video.isOpened():
+                raise ConfigError(f"video_path: cannot write a video to {video_path}")
+        if ground_truth_path:
+            Path(ground_truth_path).parent.mkdir(parents=True, exist_ok=True)
+            self._log = open(ground_truth_path, "w", encoding="utf-8")
+
+    @classmethod
+    def from_config(cls, config: SimulatorConfig) -> "Recorder | None":
+        """A Recorder for config's video_path / ground_truth_path, or None if both are empty."""
+        if not config.video_path and not config.ground_truth_path:
+            return None
+        return cls(config.video_path, config.ground_truth_path, config.rate_hz,
+                   config.width, config.height)
+
+    def write(self, simulation: Simulation, image_rgb: np.ndarray | None = None,
+              ground_truth: dict[str, Any] | None = None) -> None:
+        """Record the current frame (``image_rgb``) and ground truth of ``simulation``."""
+        if self._video is not None and image_rgb is not None:
+            self._video.write(self._cv2.cvtColor(image_rgb, self._cv2.COLOR_RGB2BGR))
+        if self._log is not None:
+            truth = ground_truth if ground_truth is not None else simulation.ground_truth()
+            linear, angular = simulation.robot_velocity()
+            record = {"stamp": simulation.stamp_ns, "seq": simulation.frame_index,
+                      "time": simulation.time, "wall_time": simulation.wall_time,
+                      "linear": linear, "angular": angular, **truth}
+            self._log.write(json.dumps(record) + "\n")
+
+    def close(self) -> None:
+        if self._video is not None:
+            self._video.release()
+            self._video = None
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+
+def benchmark(config: SimulatorConfig, frames: int = 150) -> dict[str, float]:
+    """Time the frame loop without pacing: render-only ms/frame, step-only ms, fast-mode fps."""
+    import time
+
+    simulation = Simulation(config)
+    try:
+        simulation.render()  # warm-up: first render compiles shaders / uploads textures
+        started = time.perf_counter()
+        for _ in range(frames):
+            simulation.render()
+        render_ms = (time.perf_counter() - started) / frames * 1000
+        started = time.perf_counter()
+        for frame in range(frames):
+            simulation.set_command(0.3, 0.5 * math.sin(frame / 10), simulation.time)
+            simulation.step_frame()
+        step_ms = (time.perf_counter() - started) / frames * 1000
+        started = time.perf_counter()
+        for frame in range(frames):
+            simulation.set_command(0.3, 0.5 * math.sin(frame / 10), simulation.time)
+            simulation.step_frame()
+            simulation.render()
+            simulation.ground_truth()
+        loop_seconds = time.perf_counter() - started
+    finally:
+        simulation.close()
+    return {"render_ms": render_ms, "step_ms": step_ms, "fast_fps": frames / loop_seconds}
+
+
+if __name__ == "__main__":
+    import argparse
+
+    from common.config import load_config
+
+    parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
+                                                 "python -m services.simulator.sim --frames 150")
+    parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--config", default=None)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    arguments = parser.parse_args()
+    settings = load_config(SimulatorConfig, arguments.config, arguments.set, section="simulator")
+    results = benchmark(settings, arguments.frames)
+    print(f"{settings.width}x{settings.height} shadows={settings.shadows}: "
+          f"render {results['render_ms']:.1f} ms/frame, step {results['step_ms']:.2f} ms/frame, "
+          f"fast mode (step + render + ground truth) {results['fast_fps']:.1f} frames/s")
