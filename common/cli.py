@@ -7,6 +7,7 @@
     balltrack hz camera/image_raw
     balltrack config detector                 # read parameters
     balltrack config detector v_min=30        # change them live
+    balltrack sim set_light diffuse=0.1       # drive the simulator
     balltrack experiment range --quick --out runs/range
 """
 
@@ -20,7 +21,7 @@ import time
 from common import keys as key_table
 from common.config import ConfigError, load_config, parse_overrides
 from common.keys import Keys
-from common.messages import SCHEMAS, MessageError, decode, encode
+from common.messages import SCHEMAS, SIM_OPS, MessageError, decode, encode
 from common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, add_session_arguments,
                             first_error_line, open_from_args, router_config)
 
@@ -217,6 +218,41 @@ def command_config(args) -> int:
     return 1
 
 
+def _argument_value(text: str):
+    """``0.1`` -> 0.1, ``1.5,0.2`` or ``[1.5, 0.2]`` -> [1.5, 0.2], anything else -> the string."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    if "," in text:
+        try:
+            return [float(part) for part in text.split(",")]
+        except ValueError:
+            pass
+    return text
+
+
+def command_sim(args) -> int:
+    from services.simulator.control import send_command
+
+    try:
+        request = {"op": args.op, **{key: _argument_value(value)
+                                     for key, value in parse_overrides(args.arguments).items()}}
+    except ConfigError as error:
+        print(f"balltrack sim: {error}", file=sys.stderr)
+        return 2
+    session = _open(args)
+    if session is None:
+        return 1
+    reply = send_command(session, request, args.namespace, args.timeout)
+    session.close()
+    if not reply["ok"]:
+        print(f"balltrack sim: {reply.get('error')}", file=sys.stderr)
+        return 1
+    print(json.dumps(reply))
+    return 0
+
+
 def command_experiment(args) -> int:
     from experiments.cli import main as experiment_main
 
@@ -262,6 +298,12 @@ def build_parser() -> ArgumentParser:
     config = networked("config", "read or change a service's parameters live", command_config)
     config.add_argument("service", choices=key_table.SERVICES)
     config.add_argument("changes", nargs="*", metavar="KEY=VALUE")
+
+    sim = networked("sim", "control the simulator: reset, set_light, place_ball, place_robot",
+                    command_sim)
+    sim.add_argument("op", choices=SIM_OPS)
+    sim.add_argument("arguments", nargs="*", metavar="KEY=VALUE",
+                     help="e.g. diffuse=0.1, id=tennis position=1.5,0.2, scenario=search")
 
     experiment = commands.add_parser("experiment", help="run an experiment (see --help)",
                                      add_help=False)

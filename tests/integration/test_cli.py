@@ -1,0 +1,106 @@
+"""The balltrack command against a real router and services."""
+
+import json
+import subprocess
+import sys
+import time
+
+import cv2
+import pytest
+
+from common.messages import encode
+from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, draw_ball, floor_image,
+                           process_environment, start_service)
+from tests.integration.test_pipeline import CAMERA_INFO
+
+
+def balltrack(*arguments, timeout=60):
+    return subprocess.run([sys.executable, "-m", "common.cli", *arguments], capture_output=True,
+                          text=True, timeout=timeout, cwd=REPO, env=process_environment())
+
+
+def test_detect_offline_prints_one_json_line_per_image(tmp_path):
+    ball = tmp_path / "ball.png"
+    cv2.imwrite(str(ball), draw_ball(floor_image(), 200.0, 300.0, 25.0))
+    empty = tmp_path / "empty.png"
+    cv2.imwrite(str(empty), floor_image())
+    result = balltrack("detect", str(ball), str(empty))
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [line["file"] for line in lines] == [str(ball), str(empty)]
+    (found,) = lines[0]["balls"]
+    assert abs(found["u"] - 200) < 1.5 and abs(found["v"] - 300) < 1.5
+    assert abs(found["radius_px"] - 25) < 2.5 and 0 < found["score"] <= 1
+    assert lines[1]["balls"] == []
+
+
+def test_detect_on_real_photos_finds_balls():
+    photo = SHARED / "data/real_tennis_dev/1747468182.jpg"
+    if not photo.exists():
+        pytest.skip(f"{photo} not present")
+    result = balltrack("detect", str(photo))
+    (line,) = [json.loads(text) for text in result.stdout.splitlines()]
+    # Labelled box: x 191, y 215, w 72, h 73 -> centre (227, 251.5).
+    assert any(abs(ball["u"] - 227) < 18 and abs(ball["v"] - 251.5) < 18 for ball in line["balls"])
+
+
+@pytest.mark.parametrize("arguments, reason", [
+    (["detect", "x.png", "--set", "min_radius=-1"], "min_radius"),
+    (["detect", "x.png", "--set", "bogus=1"], "bogus: unknown parameter"),
+    (["status", "--namespace", "a*b"], "namespace"),
+    (["hz"], "required"),
+    (["sim", "explode"], "invalid choice"),
+])
+def test_bad_arguments_give_one_line_and_status_2(arguments, reason):
+    result = balltrack(*arguments)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1 and reason in result.stderr, result.stderr
+
+
+def test_unreadable_image_is_reported_not_fatal(tmp_path):
+    good = tmp_path / "good.png"
+    cv2.imwrite(str(good), floor_image(64, 48))
+    result = balltrack("detect", str(tmp_path / "missing.png"), str(good))
+    assert result.returncode == 1
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert lines[0]["error"] and lines[1]["balls"] == []
+
+
+def test_no_router_is_a_clear_error():
+    result = balltrack("status", "--connect", "tcp/127.0.0.1:9", "--timeout", "1")
+    assert result.returncode == 1 and "cannot reach a Zenoh router" in result.stderr
+
+
+def test_status_config_echo_hz(router, session, log_dir):
+    locator = start_service("locator", router.endpoint, log_dir)
+    Liveliness(session).wait("locator")
+    stats = Collector(session, "locator/stats", "Stats")
+    stats.wait_count(1, 10)
+    status = balltrack("status", "--connect", router.endpoint)
+    assert status.returncode == 0, status.stderr
+    rows = {line.split()[0]: line.split() for line in status.stdout.splitlines()[1:]}
+    assert rows["locator"][1] == "yes" and rows["detector"][1] == "no"
+
+    changed = balltrack("config", "locator", "ball_radius=0.05", "--connect", router.endpoint)
+    assert changed.returncode == 0 and json.loads(changed.stdout)["ball_radius"] == 0.05
+    refused = balltrack("config", "locator", "ball_radius=-2", "--connect", router.endpoint)
+    assert refused.returncode == 2 and "ball_radius" in refused.stderr
+
+    echo = Process([sys.executable, "-m", "common.cli", "echo", "camera/camera_info", "--count",
+                    "2", "--connect", router.endpoint], log_dir / "echo.log")
+    hz = Process([sys.executable, "-m", "common.cli", "hz", "camera/camera_info", "--window", "1",
+                  "--count", "2", "--connect", router.endpoint], log_dir / "hz.log")
+    # Publish until both tools have what they need (they subscribe asynchronously).
+    deadline = time.monotonic() + 30
+    while echo.popen.poll() is None or hz.popen.poll() is None:
+        assert time.monotonic() < deadline, echo.output() + hz.output()
+        session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+        try:
+            echo.popen.wait(0.05)
+        except subprocess.TimeoutExpired:
+            pass
+    assert echo.popen.returncode == 0 and hz.popen.returncode == 0
+    printed = [json.loads(line) for line in echo.output().splitlines() if line.startswith("{")]
+    assert len(printed) == 2 and printed[0]["message"]["fx"] == pytest.approx(CAMERA_INFO["fx"])
+    assert "Hz" in hz.output()
+    assert locator.stop() == 0
