@@ -59,3 +59,30 @@ class SimClock:
 
 def make_clock(use_sim_time: bool):
     return SimClock() if use_sim_time else WallClock()
+
+
+class TimerTicks:
+    """When a timer on simulated time fires: on the first clock, on a clock at or past the next
+    whole multiple of the period, and when the clock went back (a simulation reset).
+
+    Ticks on whole multiples let a lockstep simulator predict which frames owe a command; it
+    uses this same class, so the rule cannot drift apart. Integer nanoseconds with a 1 us
+    tolerance keep float rounding from moving a tick by a frame.
+    """
+
+    TOLERANCE_NS = 1_000
+
+    def __init__(self):
+        self.next_tick_ns: int | None = None
+
+    def reset(self) -> None:
+        """A new timer (e.g. a follower that just started): it fires on the next clock."""
+        self.next_tick_ns = None
+
+    def fires(self, stamp_ns: int, period: float) -> bool:
+        period_ns = max(1, round(period * 1e9))
+        due = (self.next_tick_ns is None or stamp_ns >= self.next_tick_ns - self.TOLERANCE_NS
+               or stamp_ns < self.next_tick_ns - 2 * period_ns)
+        if due:
+            self.next_tick_ns = ((stamp_ns + self.TOLERANCE_NS) // period_ns + 1) * period_ns
+        return due

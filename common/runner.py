@@ -18,7 +18,6 @@ A service module only says what it subscribes to and publishes::
 import argparse
 import collections
 import logging
-import math
 import signal
 import sys
 import threading
@@ -27,9 +26,10 @@ import traceback
 from typing import Any, Callable
 
 import numpy as np
+import zenoh
 
 from common import keys as key_table
-from common.clock import SimClock, WallClock
+from common.clock import SimClock, TimerTicks, WallClock
 from common.config import ConfigError, config_to_dict, load_config, replace_config
 from common.keys import Keys
 from common.messages import MessageError, decode, encode
@@ -106,6 +106,14 @@ class Publisher:
         self._context.stats.count("published")
 
 
+def in_order(callback: Callable) -> "zenoh.handlers.Callback":
+    """Run a subscriber callback on Zenoh's network thread, so one service's callbacks run one
+    at a time in arrival order. (zenoh-python's default gives each subscriber its own thread:
+    a ``clock`` could then overtake the ``detected_ball`` the router sent before it, and a
+    lockstep simulation would not be reproducible.) Callbacks must therefore be short."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
 class ServiceContext:
     """What a service's ``build`` function uses: session, keys, config, stats, clock, stop."""
 
@@ -176,7 +184,7 @@ class ServiceContext:
                 self.stats.count("received")
             self.process(full_key, message_name, sample.payload.to_bytes(), handler, count)
 
-        self._declared.append(self.session.declare_subscriber(full_key, on_sample))
+        self._declared.append(self.session.declare_subscriber(full_key, in_order(on_sample)))
 
     def subscribe_latest(self, key: str, message_name: str, handler: Callable[[dict], None]) -> None:
         """Like ``subscribe`` but a worker thread serves only the newest sample: under
@@ -203,7 +211,7 @@ class ServiceContext:
                     self.process(full_key, message_name, payload, handler, True)
 
         self.start_thread(worker, f"{self.name}-{key}")
-        self._declared.append(self.session.declare_subscriber(full_key, on_sample))
+        self._declared.append(self.session.declare_subscriber(full_key, in_order(on_sample)))
 
     def start_thread(self, target: Callable[[], None], name: str) -> None:
         """A worker that must return soon after ``stop`` is set; joined before the session closes
@@ -230,17 +238,13 @@ class ServiceContext:
                 self.log.error("timer callback failed:\n%s", traceback.format_exc())
 
         def sim_loop():
-            seen_updates, next_tick = 0, None
+            seen_updates, ticks = 0, TimerTicks()
             while not self.stop.is_set():
                 updates, now_ns = self.clock.wait_for_update(seen_updates, 0.2)
-                if updates == seen_updates:
-                    continue
-                seen_updates, now = updates, now_ns / 1e9
-                # Fire on the first clock, when a multiple of the period is crossed, and after
-                # the clock went back (a simulation reset).
-                if next_tick is None or now >= next_tick or now < next_tick - 2 * period():
-                    run(callback)
-                    next_tick = (math.floor(now / period() + 1e-9) + 1) * period()
+                if updates != seen_updates:
+                    seen_updates = updates
+                    if ticks.fires(now_ns, period()):
+                        run(callback)
 
         def wall_loop():
             next_tick = time.monotonic()

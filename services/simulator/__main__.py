@@ -1,0 +1,5 @@
+import sys
+
+from services.simulator.service import main
+
+sys.exit(main())

@@ -1,0 +1,193 @@
+"""Simulator service: the MuJoCo world as camera, robot base and referee (the paper's Gazebo).
+
+Publishes every frame: ``camera/image_raw`` (Image, ``encoding`` rgb8 by default; header stamp =
+simulated time, seq = frame index, frame_id "camera"), ``sim/ground_truth`` (GroundTruth, same
+header), ``clock`` (Clock); ``camera/camera_info`` (CameraInfo) once per simulated second.
+Subscribes: ``cmd_vel`` (Twist: linear[0] m/s, angular[2] rad/s, applied before the next step;
+the safety stop zeroes it after ``cmd_timeout`` simulated seconds without one); for lockstep,
+``detected_balls`` and the liveliness tokens ``alive/*``. Queries: ``camera/camera_info`` ->
+CameraInfo; ``sim/control``: SimCommand -> SimReply (client: services/simulator/control.py).
+Stats add ``real_time_factor``, ``render_ms``, ``lockstep_timeouts``, ``frames``; ``dropped``
+counts realtime schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``,
+``encoding`` and ``jpeg_quality`` may be changed live through ``simulator/config``.
+
+Lockstep, per frame k: image_raw + ground_truth; wait for ``detected_balls`` seq k (if a
+detector is alive); clock; if a follower is alive and its simulated-time timer fires on this
+clock, wait for its cmd_vel whose added ``time`` field equals this stamp; step. Each wait gives
+up after ``lockstep_timeout`` wall seconds (counted), so the same seed gives the same run.
+
+Example:
+    python -m services.simulator --set scenario=chase --set pacing=lockstep --set seed=3
+"""
+
+import collections
+import math
+import threading
+import time
+
+import cv2
+import zenoh
+
+from common import keys
+from common.images import bgr_to_message
+from common.messages import MessageError, decode, encode, header
+from common.runner import ServiceContext, run_service
+from services.simulator.config import SimulatorConfig
+from services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+from services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
+
+LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
+                 "encoding", "jpeg_quality"}
+
+
+def image_message(rgb, head: dict, config: SimulatorConfig) -> dict:
+    """The Image message of a rendered RGB frame (rgb8 needs no conversion at all)."""
+    if config.encoding == "rgb8":
+        return {"header": head, "width": rgb.shape[1], "height": rgb.shape[0], "encoding": "rgb8",
+                "data": rgb.tobytes()}
+    return bgr_to_message(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), head["stamp"], head["seq"],
+                          head["frame_id"], config.encoding, config.jpeg_quality)
+
+
+def build(service: ServiceContext):
+    recorder = Recorder.from_config(service.config)
+    simulation = Simulation(service.config)
+    simulation.render_view("front")  # the first render compiles shaders: not in frame 1's time
+    # Lockstep must not lose a frame (it would wait for an answer that cannot come).
+    block = {"congestion_control": zenoh.CongestionControl.BLOCK}
+    images = service.publisher(keys.IMAGE_RAW, "Image",
+                               **(block if service.config.pacing == "lockstep" else {}))
+    truths = service.publisher(keys.GROUND_TRUTH, "GroundTruth", **block)
+    clocks = service.publisher(keys.CLOCK, "Clock", **block)
+    infos = service.publisher(keys.CAMERA_INFO, "CameraInfo", **block)
+    gate, meter, pacer = LockstepGate(service.stop), RateMeter(), RealtimePacer()
+    render_seconds, timing = collections.deque(maxlen=100), {"render_ms": 0.0}
+    alive_keys = service.keys("alive/*")
+    # Held from step to ground truth, so that no sim/control query lands between a frame's
+    # image and its ground truth (the core locks each call, not the sequence).
+    frame_lock = threading.Lock()
+    pending = collections.deque()  # valid cmd_vel (linear, angular), applied before a step
+
+    def camera_info() -> dict:
+        return {"header": header(simulation.stamp_ns, simulation.frame_index),
+                **simulation.camera_info()}
+
+    def on_command(twist: dict) -> None:
+        linear, angular = twist["linear"][0], twist["angular"][2]  # finite: the schema checked
+        if abs(linear) > ABSURD_LINEAR or abs(angular) > ABSURD_ANGULAR:
+            raise MessageError(f"not a plausible command: linear {linear:g} m/s, angular "
+                               f"{angular:g} rad/s")
+        pending.append((linear, angular))  # a callback never waits for a render
+        if isinstance(twist.get("time"), int):  # the follower's tick, awaited in lockstep
+            gate.commanded(twist["time"])
+
+    def apply_commands() -> None:
+        while pending:
+            try:  # at the time of the last frame; the safety stop counts from there
+                simulation.set_command(*pending.popleft())
+            except ValueError as error:
+                service.reject(service.keys(keys.CMD_VEL), str(error))
+
+    def on_control(query) -> None:
+        try:
+            request = decode("SimCommand", query.payload.to_bytes() if query.payload else b"")
+            with frame_lock:
+                reply = simulation.handle_command(request)
+        except MessageError as error:
+            reply = {"ok": False, "error": str(error)}
+        if reply["ok"]:
+            service.log.info("sim/control: %s", request)
+        else:
+            reply["error"] = reply["error"][:4000]
+            service.reject(service.keys(keys.SIM_CONTROL), reply["error"])
+        query.reply(query.key_expr, encode("SimReply", reply))
+
+    def on_token(key_expr, alive: bool) -> None:
+        gate.set_alive(service.keys.strip(str(key_expr)).split("/", 1)[1], alive)
+
+    def on_config_change(config: SimulatorConfig) -> None:
+        for name in sorted(set(vars(config)) - LIVE_SETTINGS):
+            if getattr(config, name) != getattr(simulation.config, name):
+                service.log.warning("%s: the running simulation keeps %r until a restart",
+                                    name, getattr(simulation.config, name))
+
+    service.subscribe(keys.CMD_VEL, "Twist", on_command)
+    service.subscribe(keys.DETECTED_BALLS, "Ball2DArray",
+                      lambda balls: gate.answered(balls["header"]["seq"]), count=False)
+    service.on_config_change(on_config_change)
+    entities = [
+        service.session.liveliness().declare_subscriber(alive_keys, lambda sample: on_token(
+            sample.key_expr, sample.kind == zenoh.SampleKind.PUT), history=True),
+        service.session.declare_queryable(service.keys(keys.CAMERA_INFO), lambda query: query.reply(
+            query.key_expr, encode("CameraInfo", camera_info()))),
+        service.session.declare_queryable(service.keys(keys.SIM_CONTROL), on_control)]
+    base_snapshot = service.stats.snapshot
+    service.stats.snapshot = lambda stamp: {
+        **base_snapshot(stamp), "real_time_factor": meter.factor(), "frames": simulation.frame_index,
+        "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts}
+
+    def frame(config: SimulatorConfig, next_info: float) -> float:
+        """Step, render, pace, publish one frame; returns when the next camera_info is due."""
+        with frame_lock:
+            apply_commands()
+            now = simulation.step_frame(time.time())
+            head = header(simulation.stamp_ns, simulation.frame_index)
+            started = time.perf_counter()
+            rgb = simulation.render()
+            render_seconds.append(time.perf_counter() - started)
+            timing["render_ms"] = 1000 * sum(render_seconds) / len(render_seconds)  # last 100
+            truth = simulation.ground_truth()
+            if recorder is not None:
+                recorder.write(simulation, rgb, truth)
+        if config.pacing == "realtime":
+            slips = pacer.slips
+            service.stop.wait(pacer.delay(now, config.real_time_factor, simulation.period,
+                                          time.monotonic()))
+            service.stats.count("dropped", pacer.slips - slips)
+        else:
+            pacer.reset()
+        images.put(image_message(rgb, head, config))
+        truths.put({"header": head, **truth})
+        if now + 1e-6 >= next_info:  # (the core sums time steps: 0.99999... is 1 s)
+            infos.put(camera_info())
+            next_info = math.floor(now + 1e-6) + 1.0
+        # Lockstep: time moves on once the detector has answered this frame, and, on the
+        # frames whose clock makes the follower's timer fire, once its command is applied.
+        lockstep = config.pacing == "lockstep"
+        if lockstep and gate.alive("detector"):
+            gate.wait_answer(head["seq"], config.lockstep_timeout)
+        if service.stop.is_set():
+            return next_info
+        clocks.put({"stamp": head["stamp"]})
+        if gate.follower_fires(head["stamp"], 1 / config.lockstep_command_rate_hz) and lockstep:
+            gate.wait_command(head["stamp"], config.lockstep_timeout)
+        meter.add(time.monotonic(), now)
+        return next_info
+
+    def loop(context: ServiceContext) -> None:
+        for reply in context.session.liveliness().get(alive_keys, timeout=2.0):  # up before frame 1
+            if reply.ok is not None:
+                on_token(reply.ok.key_expr, True)
+        next_info, next_log = 0.0, time.monotonic() + 5.0
+        try:
+            while not context.stop.is_set():
+                next_info = frame(context.config, next_info)
+                if time.monotonic() >= next_log:
+                    next_log += 5.0
+                    context.log.info("real-time factor %.3f (%.1f frames/s, render %.1f ms, "
+                                     "%d lockstep timeouts)", meter.factor(),
+                                     meter.frames_per_second(), timing["render_ms"], gate.timeouts)
+        finally:
+            context.log.info("stopped after %d frames (%.2f s simulated), %d lockstep timeouts",
+                             simulation.frame_index, simulation.time, gate.timeouts)
+            for entity in reversed(entities):
+                entity.undeclare()
+            simulation.close()
+            if recorder is not None:
+                recorder.close()
+
+    return loop
+
+
+def main(argv=None) -> int:
+    return run_service("simulator", SimulatorConfig, build, argv, __doc__)

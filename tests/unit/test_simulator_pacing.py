@@ -1,0 +1,82 @@
+"""The simulator service's pacing helpers: realtime deadlines, timer ticks, lockstep waits."""
+
+import math
+import threading
+
+import pytest
+
+from common.clock import TimerTicks
+from services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+
+PERIOD = 1 / 30
+
+
+def test_realtime_deadlines_follow_sim_time_and_never_burst():
+    pacer = RealtimePacer()
+    assert pacer.delay(PERIOD, 1.0, PERIOD, now=100.0) == 0.0  # the first frame anchors
+    assert pacer.delay(2 * PERIOD, 1.0, PERIOD, now=100.01) == pytest.approx(PERIOD - 0.01)
+    # Twice as fast: the next frame is due half a period after the anchor.
+    pacer.reset()
+    pacer.delay(PERIOD, 2.0, PERIOD, now=200.0)
+    assert pacer.delay(2 * PERIOD, 2.0, PERIOD, now=200.0) == pytest.approx(PERIOD / 2)
+    # Late by less than a frame: due now, the schedule is kept (the next one catches up).
+    pacer.reset()
+    pacer.delay(PERIOD, 1.0, PERIOD, now=300.0)
+    assert pacer.delay(2 * PERIOD, 1.0, PERIOD, now=300.0 + 1.5 * PERIOD) == 0.0
+    assert pacer.delay(3 * PERIOD, 1.0, PERIOD, now=300.0 + 1.6 * PERIOD) == pytest.approx(0.4 * PERIOD)
+    assert pacer.slips == 0
+    # Late by more than a frame: a slip, and the schedule restarts from now (no burst).
+    assert pacer.delay(4 * PERIOD, 1.0, PERIOD, now=300.0 + 10 * PERIOD) == 0.0
+    assert pacer.slips == 1
+    assert pacer.delay(5 * PERIOD, 1.0, PERIOD, now=300.0 + 10 * PERIOD) == pytest.approx(PERIOD)
+
+
+def test_timer_ticks_fire_on_the_first_clock_then_on_crossing_multiples():
+    ticks = TimerTicks()
+    fired = [frame for frame in range(1, 31) if ticks.fires(round(frame * PERIOD * 1e9), 0.1)]
+    assert fired[0] == 1
+    # Then one tick exactly on each multiple of 0.1 s (every third frame at 30 Hz).
+    assert fired == [1] + list(range(3, 31, 3))
+    assert not ticks.fires(round(30 * PERIOD * 1e9), 0.1)  # the same clock again
+    assert ticks.fires(round(2 * PERIOD * 1e9), 0.1)      # the clock went back: a new timer
+
+
+def test_lockstep_gate_waits_for_the_answer_or_times_out():
+    stop = threading.Event()
+    gate = LockstepGate(stop)
+    assert gate.wait_answer(5, timeout=0.0)  # no detector alive: nothing to wait for
+    gate.set_alive("detector", True)
+    assert not gate.wait_answer(5, timeout=0.05) and gate.timeouts == 1
+    answer = threading.Timer(0.01, gate.answered, (5,))
+    answer.start()
+    assert gate.wait_answer(5, timeout=10)
+    answer.join()
+    leave = threading.Timer(0.01, gate.set_alive, ("detector", False))
+    leave.start()
+    assert gate.wait_answer(6, timeout=10)  # the detector went away: no need to wait
+    leave.join()
+    assert gate.timeouts == 1
+
+
+def test_lockstep_gate_follower_ticks_restart_with_a_new_follower():
+    gate = LockstepGate(threading.Event())
+    assert not gate.follower_fires(33_333_333, 0.1)  # no follower
+    gate.set_alive("follower", True)
+    assert gate.follower_fires(66_666_667, 0.1)      # its first clock
+    assert not gate.follower_fires(100_000_000 - 2_000, 0.1)  # beyond the 1 us tolerance
+    assert gate.follower_fires(100_000_000, 0.1)
+    gate.set_alive("follower", False)
+    gate.set_alive("follower", True)                  # restarted between two clocks
+    assert gate.follower_fires(133_333_333, 0.1)
+    gate.commanded(133_333_333)
+    assert gate.wait_command(133_333_333, timeout=0.0)
+
+
+def test_rate_meter_reports_sim_seconds_per_wall_second():
+    meter = RateMeter(window=5.0)
+    assert meter.factor() == 0.0
+    for frame in range(200):
+        meter.add(frame * 0.05, frame * PERIOD)  # 30 Hz frames every 50 ms of wall time
+    assert meter.factor() == pytest.approx(PERIOD / 0.05)
+    assert meter.frames_per_second() == pytest.approx(20.0)
+    assert math.isclose(meter.factor(), 2 / 3, rel_tol=1e-9)
