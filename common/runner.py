@@ -18,6 +18,7 @@ A service module only says what it subscribes to and publishes::
 import argparse
 import collections
 import logging
+import os
 import signal
 import sys
 import threading
@@ -117,12 +118,13 @@ def in_order(callback: Callable) -> "zenoh.handlers.Callback":
 class ServiceContext:
     """What a service's ``build`` function uses: session, keys, config, stats, clock, stop."""
 
-    def __init__(self, name: str, session, namespace: str, config):
+    def __init__(self, name: str, session, namespace: str, config,
+                 stop: threading.Event | None = None):
         self.name = name
         self.session = session
         self.keys = Keys(namespace)
         self.stats = Stats(name)
-        self.stop = threading.Event()
+        self.stop = stop or threading.Event()
         self.log = logging.getLogger(name)
         self.rejections = RateLimitedLog(self.log)
         self._config = config
@@ -292,15 +294,32 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
         print(f"{name}: {error}", file=sys.stderr)
         return 2
 
-    try:
-        session = open_from_args(args)
-    except SessionOpenError as error:
-        print(f"{name}: {error}", file=sys.stderr)
-        return 1
-
-    context = ServiceContext(name, session, args.namespace, config)
+    # The session opens in a thread so that SIGINT/SIGTERM while the router is still
+    # unreachable ends the service at once with status 0, as when it is running.
+    stop = threading.Event()
     for signal_number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signal_number, lambda *_: context.stop.set())
+        signal.signal(signal_number, lambda *_: stop.set())
+    opened: dict[str, Any] = {}
+
+    def open_session():
+        try:
+            opened["session"] = open_from_args(args)
+        except SessionOpenError as error:
+            opened["error"] = error
+        opened["done"] = True
+
+    threading.Thread(target=open_session, name=f"{name}-open", daemon=True).start()
+    while "done" not in opened and not stop.wait(0.1):
+        pass
+    if "error" in opened:
+        print(f"{name}: {opened['error']}", file=sys.stderr)
+        return 1
+    if "session" not in opened:
+        logging.getLogger(name).info("stopped before a router answered")
+        os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined
+    session = opened["session"]
+
+    context = ServiceContext(name, session, args.namespace, config, stop)
     status = 0
     try:
         loop = build(context)

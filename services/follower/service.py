@@ -32,8 +32,10 @@ def build(service: ServiceContext):
             last_header["header"] = ball["header"]
 
     def tick() -> None:
-        now_ns = service.clock.now_ns()
         with lock:
+            # Read the clock under the lock: a detection stamped after this tick's time would
+            # look like the clock going back (a reset) and cost one spurious search command.
+            now_ns = service.clock.now_ns()
             command = controller.tick(now_ns / 1e9)
             header = last_header["header"]
         if command.mode == SEARCH or header is None:

@@ -1,0 +1,457 @@
+"""``python -m deploy start|stop|status``: run balltrack under the supervisor, in one run folder.
+
+    python -m deploy start --router                          # router + four services (one host)
+    python -m deploy start --router --listen tcp/0.0.0.0:7447 --services detector,locator,follower
+    python -m deploy start --connect tcp/192.168.1.10:7447 --services detector --namespace robot1
+    python -m deploy start --router --config-dir deploy/config/demo --set follower.max_size_thresh=0.3
+    python -m deploy status [--json]
+    python -m deploy stop
+
+``start`` writes ``launch.json`` into the run folder (default ``runs/default``), starts the
+supervisor in the background and returns once every service has declared its liveliness token
+(``--wait`` seconds at most; ``--foreground`` keeps the supervisor in this terminal instead, Ctrl-C
+stops it). ``stop`` sends the supervisor SIGTERM and waits for it; ``status`` shows pids,
+restarts and, from the network, which services are alive and their stats.
+"""
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+from common.keys import SERVICES, Keys, alive_key
+from common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints, open_session
+from deploy.supervisor import (REPO, ChildSpec, SupervisorSettings, child_environment, describe_exit,
+                               die_with_parent, pid_alive, save_launch, supervise)
+
+DEFAULT_RUN_DIR = "runs/default"
+DEFAULT_LISTEN = f"tcp/0.0.0.0:{DEFAULT_PORT}"
+
+
+class LaunchError(RuntimeError):
+    pass
+
+
+# -- building the command lines --------------------------------------------------------------
+def endpoint_port(endpoint: str) -> int | None:
+    """The port of ``tcp/HOST:PORT`` (also udp, tls, quic), or None."""
+    address = endpoint.split("/", 1)[-1].split("#", 1)[0]
+    try:
+        return int(address.rsplit(":", 1)[1])
+    except (IndexError, ValueError):
+        return None
+
+
+def local_endpoint(listen: str) -> str:
+    """Where a process on the same host reaches a router listening on ``listen``."""
+    protocol, _, address = listen.partition("/")
+    host, _, port = address.split("#", 1)[0].rpartition(":")
+    if host in ("0.0.0.0", "", "[::]", "*"):
+        host = "127.0.0.1"
+    return f"{protocol}/{host}:{port}"
+
+
+def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, list[str]]:
+    overrides: dict[str, list[str]] = {name: [] for name in services}
+    for item in items:
+        target, separator, value = item.partition("=")
+        service, dot, key = target.partition(".")
+        if not separator or not dot or not key:
+            raise LaunchError(f"--set {item}: expected SERVICE.KEY=VALUE, e.g. follower.max_size_thresh=0.3")
+        if service not in SERVICES:
+            raise LaunchError(f"--set {item}: unknown service {service!r} (one of {', '.join(SERVICES)})")
+        if service not in overrides:
+            raise LaunchError(f"--set {item}: {service} is not among --services")
+        overrides[service].append(f"{key}={value}")
+    return overrides
+
+
+def build_specs(args) -> tuple[list[ChildSpec], dict]:
+    """The children (router first) and the facts ``status`` needs, from ``start``'s options."""
+    python = sys.executable
+    services = [name.strip() for name in args.services.split(",") if name.strip()]
+    unknown = [name for name in services if name not in SERVICES]
+    if unknown:
+        raise LaunchError(f"--services: unknown {', '.join(unknown)} (known: {', '.join(SERVICES)})")
+    Keys(args.namespace)  # raises ValueError for a namespace Zenoh cannot route
+    overrides = parse_service_overrides(args.overrides, services)
+    absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
+    specs: list[ChildSpec] = []
+    listen = args.listen or [DEFAULT_LISTEN]
+    if args.router:
+        argv = [python, "-m", "common.cli", "router"]
+        for endpoint in listen:
+            argv += ["--listen", endpoint]
+        for endpoint in args.router_connect:
+            argv += ["--connect", endpoint]
+        if args.router_config:
+            argv += ["--zenoh-config", absolute(args.router_config)]
+        port = endpoint_port(listen[0]) if listen[0].startswith("tcp/") else None
+        if port == 0:
+            raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
+        specs.append(ChildSpec("router", argv, port=port))
+    elif args.listen or args.router_connect or args.router_config:
+        raise LaunchError("--listen, --router-connect and --router-config need --router")
+
+    if args.connect:
+        connect = list(args.connect)
+    elif args.router:
+        connect = [local_endpoint(listen[0])]
+    elif args.zenoh_config:
+        connect = []  # the json5 file names the router
+    else:
+        connect = default_endpoints()
+    config_dir = Path(args.config_dir).resolve() if args.config_dir else None
+    if config_dir is not None and not config_dir.is_dir():
+        raise LaunchError(f"--config-dir: {args.config_dir} is not a directory")
+    for name in services:
+        argv = [python, "-m", f"services.{name}"]
+        for endpoint in connect:
+            argv += ["--connect", endpoint]
+        if args.namespace:
+            argv += ["--namespace", args.namespace]
+        if args.zenoh_config:
+            argv += ["--zenoh-config", absolute(args.zenoh_config)]
+        if config_dir is not None and (config_dir / f"{name}.toml").is_file():
+            argv += ["--config", str(config_dir / f"{name}.toml")]
+        for override in overrides[name]:
+            argv += ["--set", override]
+        argv += ["--log-level", args.log_level]
+        specs.append(ChildSpec(name, argv))
+    info = {"connect": connect, "namespace": args.namespace, "services": services,
+            "zenoh_config": absolute(args.zenoh_config), "router": bool(args.router)}
+    return specs, info
+
+
+# -- the network side: liveliness and stats --------------------------------------------------
+def open_for(info: dict, timeout: float):
+    return open_session(info.get("connect") or None, info.get("zenoh_config"), open_timeout=timeout)
+
+
+def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.Event | None = None,
+               failed=lambda: None) -> set[str]:
+    """Wait until every service in ``services`` has its ``alive/<service>`` token; the missing."""
+    deadline = time.monotonic() + timeout
+    keys = Keys(info.get("namespace", ""))
+    try:
+        session = open_for(info, timeout)
+    except SessionOpenError:
+        return set(services)
+    alive: set[str] = set()
+    changed = threading.Condition()
+
+    def on_token(sample):
+        import zenoh
+
+        name = keys.strip(str(sample.key_expr)).split("/", 1)[1]
+        with changed:
+            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
+            changed.notify_all()
+
+    subscriber = session.liveliness().declare_subscriber(keys("alive/*"), on_token, history=True)
+    try:
+        with changed:
+            while not set(services) <= alive and time.monotonic() < deadline:
+                if (stop is not None and stop.is_set()) or failed():
+                    break
+                changed.wait(min(0.2, max(0.0, deadline - time.monotonic())))
+            missing = set(services) - alive
+    finally:
+        subscriber.undeclare()
+        session.close()
+    return missing
+
+
+def network_status(info: dict, timeout: float) -> tuple[set[str] | None, dict[str, dict], str | None]:
+    """(alive services or None if unreachable, stats per service, error)."""
+    from common.messages import MessageError, decode
+
+    keys = Keys(info.get("namespace", ""))
+    try:
+        session = open_for(info, timeout)
+    except SessionOpenError as error:
+        return None, {}, str(error)
+    alive: set[str] = set()
+    for reply in session.liveliness().get(keys("alive/*"), timeout=timeout):
+        if reply.ok is not None:
+            alive.add(keys.strip(str(reply.ok.key_expr)).split("/", 1)[1])
+    stats: dict[str, dict] = {}
+    complete = threading.Event()
+
+    def on_stats(sample):
+        try:
+            message = decode("Stats", sample.payload.to_bytes())
+        except MessageError:
+            return
+        stats[message["service"]] = message
+        if alive <= set(stats):
+            complete.set()
+
+    subscriber = session.declare_subscriber(keys("*/stats"), on_stats)
+    if alive:
+        complete.wait(2.5)  # stats come at 1 Hz
+    subscriber.undeclare()
+    session.close()
+    return alive, stats, None
+
+
+# -- run folders -----------------------------------------------------------------------------
+def read_pid(path: Path) -> int | None:
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def read_status(run_dir: Path) -> dict | None:
+    try:
+        return json.loads((run_dir / "status.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def running_supervisor(run_dir: Path) -> int | None:
+    pid = read_pid(run_dir / "supervisor.pid")
+    return pid if pid is not None and pid_alive(pid) else None
+
+
+def tail(path: Path, lines: int = 15) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+class Launched:
+    """A supervisor started in the background by this process (see :func:`launch`)."""
+
+    def __init__(self, run_dir: Path, popen: subprocess.Popen):
+        self.run_dir = run_dir
+        self.popen = popen
+
+    def stop(self, timeout: float = 40.0) -> int:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait()
+        return self.popen.returncode
+
+
+def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0,
+           output=sys.stdout, tie_to_parent: bool = False) -> Launched:
+    """Start a supervisor in the background; return once the services are alive.
+
+    ``tie_to_parent``: the supervisor (and so everything) gets SIGTERM if this process dies
+    (the demo); without it the supervisor outlives ``python -m deploy start``.
+    Raises LaunchError (with the supervisor stopped) if it cannot start or a service fails."""
+    run_dir = Path(run_dir).resolve()
+    if running_supervisor(run_dir):
+        raise LaunchError(f"a supervisor already runs in {run_dir} (python -m deploy stop --run-dir {run_dir})")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "status.json").unlink(missing_ok=True)
+    save_launch(run_dir, specs, {**info, "run_dir": str(run_dir)})
+    with open(run_dir / "supervisor.log", "ab") as log:
+        popen = subprocess.Popen([sys.executable, "-m", "deploy", "supervise", "--run-dir", str(run_dir)],
+                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                 cwd=REPO, env=child_environment(), start_new_session=True,
+                                 preexec_fn=die_with_parent if tie_to_parent else None)
+    launched = Launched(run_dir, popen)
+
+    def failed_children() -> list[str]:
+        status = read_status(run_dir) or {}
+        return [name for name, child in status.get("children", {}).items() if child["state"] == "failed"]
+
+    def give_up(reason: str):
+        launched.stop()
+        logs = "".join(f"\n--- {name}.log (end) ---\n{tail(run_dir / f'{name}.log')}"
+                       for name in [spec.name for spec in specs] if (run_dir / f"{name}.log").exists())
+        raise LaunchError(f"{reason}\n--- supervisor.log (end) ---\n{tail(run_dir / 'supervisor.log')}{logs}")
+
+    deadline = time.monotonic() + max(wait, 30.0)
+    while True:  # the supervisor writes status.json as it starts each child
+        status = read_status(run_dir) or {}
+        if status.get("supervisor", {}).get("state") == "running":
+            break
+        if popen.poll() is not None:
+            give_up(f"the supervisor exited ({describe_exit(popen.returncode)})")
+        if time.monotonic() > deadline:
+            give_up("the supervisor did not start its children in time")
+        time.sleep(0.1)  # polling a file the supervisor rewrites; bounded by the deadline
+    print(f"supervisor pid {popen.pid}, run folder {run_dir}", file=output, flush=True)
+    services = info.get("services", [])
+    if wait > 0 and services:
+        missing = wait_alive(info, services, wait, failed=lambda: bool(failed_children())
+                             or popen.poll() is not None)
+        if failed_children():
+            give_up(f"failed: {', '.join(failed_children())}")
+        if missing:
+            give_up(f"not alive after {wait:.0f} s: {', '.join(sorted(missing))}")
+        print(f"alive: {', '.join(services)}", file=output, flush=True)
+    return launched
+
+
+def stop_run(run_dir: Path, timeout: float = 40.0, output=sys.stdout) -> int:
+    pid = running_supervisor(run_dir)
+    if pid is None:
+        stale = sorted(path.name for path in run_dir.glob("*.pid"))
+        for path in run_dir.glob("*.pid"):  # left by a supervisor that was killed
+            path.unlink(missing_ok=True)
+        print(f"no supervisor running in {run_dir}"
+              + (f" (removed stale {', '.join(stale)})" if stale else ""), file=output)
+        return 0
+    os.kill(pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout
+    while pid_alive(pid):
+        if time.monotonic() > deadline:
+            print(f"supervisor {pid} still running after {timeout:.0f} s", file=sys.stderr)
+            return 1
+        time.sleep(0.1)  # not our child: poll its pid, bounded by the deadline
+    status = read_status(run_dir) or {}
+    exit_code = status.get("supervisor", {}).get("exit_code")
+    for name, child in status.get("children", {}).items():
+        print(f"{name:<10} {child['state']:<8} {child.get('last_exit_text') or ''}", file=output)
+    print(f"supervisor {pid} stopped (exit {exit_code})", file=output)
+    return 0 if exit_code == 0 else 1
+
+
+# -- commands --------------------------------------------------------------------------------
+def command_start(args) -> int:
+    run_dir = Path(args.run_dir).resolve()
+    try:
+        specs, info = build_specs(args)
+    except (LaunchError, ValueError) as error:
+        print(f"deploy start: {error}", file=sys.stderr)
+        return 2
+    if args.foreground:
+        if running_supervisor(run_dir):
+            print(f"deploy start: a supervisor already runs in {run_dir}", file=sys.stderr)
+            return 1
+        save_launch(run_dir, specs, {**info, "run_dir": str(run_dir)})
+        return supervise(run_dir, log_file=True)
+    try:
+        launch(run_dir, specs, info, args.wait)
+    except LaunchError as error:
+        print(f"deploy start: {error}", file=sys.stderr)
+        return 1
+    print(f"logs in {run_dir}; python -m deploy status --run-dir {args.run_dir}; "
+          f"python -m deploy stop --run-dir {args.run_dir}")
+    return 0
+
+
+def command_stop(args) -> int:
+    return stop_run(Path(args.run_dir).resolve(), args.timeout)
+
+
+def collect_status(run_dir: Path, timeout: float, network: bool = True) -> dict:
+    status = read_status(run_dir)
+    if status is None:
+        return {"run_dir": str(run_dir), "supervisor": {"running": False}, "children": {},
+                "error": "no status.json (never started here?)"}
+    supervisor = status["supervisor"]
+    supervisor["running"] = bool(supervisor.get("pid")) and running_supervisor(run_dir) == supervisor["pid"]
+    for child in status["children"].values():
+        child["running"] = bool(child["pid"]) and supervisor["running"] and pid_alive(child["pid"])
+    result = {"run_dir": str(run_dir), **status}
+    if network and supervisor["running"]:
+        alive, stats, error = network_status(supervisor, timeout)
+        result["network_error"] = error
+        for name, child in status["children"].items():
+            if name in SERVICES:
+                child["alive"] = None if alive is None else name in alive
+                child["stats"] = stats.get(name)
+    return result
+
+
+def command_status(args) -> int:
+    run_dir = Path(args.run_dir).resolve()
+    result = collect_status(run_dir, args.timeout, network=not args.no_network)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0 if result["supervisor"].get("running") else 1
+    supervisor = result["supervisor"]
+    if "error" in result:
+        print(f"{run_dir}: {result['error']}")
+        return 1
+    state = "running" if supervisor["running"] else f"not running ({supervisor.get('state')})"
+    print(f"supervisor pid {supervisor.get('pid')} {state}; run folder {run_dir}")
+    if result.get("network_error"):
+        print(f"network: {result['network_error']}")
+    print(f"{'name':<10} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
+          f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7}")
+    for name, child in result["children"].items():
+        alive = {True: "yes", False: "no", None: "?"}[child.get("alive")] if "alive" in child else "-"
+        stats = child.get("stats")
+        figures = (f"{stats['received']:>8} {stats['published']:>9} {stats['rejected']:>8} "
+                   f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f}") if stats else ""
+        pid = child["pid"] if child.get("running") else "-"
+        print(f"{name:<10} {pid!s:>7} {child['state']:<8} {child['restarts']:>8} "
+              f"{child.get('last_exit_text') or '-':<18} {alive:<5} {figures}")
+    return 0 if supervisor["running"] else 1
+
+
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="python -m deploy", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
+
+    def with_run_dir(sub):
+        sub.add_argument("--run-dir", default=DEFAULT_RUN_DIR, metavar="DIR",
+                         help=f"the run folder: logs, pid files, status (default {DEFAULT_RUN_DIR})")
+        return sub
+
+    start = with_run_dir(commands.add_parser("start", help="start a router and services under the supervisor"))
+    start.add_argument("--router", action="store_true", help="also run a Zenoh router (first)")
+    start.add_argument("--listen", action="append", metavar="ENDPOINT",
+                       help=f"the router's endpoint, repeatable (default {DEFAULT_LISTEN})")
+    start.add_argument("--router-connect", action="append", default=[], metavar="ENDPOINT",
+                       help="another host's router for ours to join (a cluster), repeatable")
+    start.add_argument("--router-config", metavar="FILE",
+                       help="a Zenoh json5 config for the router (e.g. deploy/zenoh/router.json5)")
+    start.add_argument("--services", default=",".join(SERVICES),
+                       help=f"comma-separated services to run (default {','.join(SERVICES)})")
+    start.add_argument("--connect", action="append", metavar="ENDPOINT",
+                       help="the router the services use, repeatable (default: ours with --router, "
+                            "else $BALLTRACK_CONNECT or tcp/127.0.0.1:7447)")
+    start.add_argument("--namespace", default=os.environ.get("BALLTRACK_NAMESPACE", ""), metavar="NS",
+                       help="key prefix for every service, e.g. robot1")
+    start.add_argument("--zenoh-config", metavar="FILE",
+                       help="a Zenoh json5 config for the services (e.g. deploy/zenoh/client.json5)")
+    start.add_argument("--config-dir", metavar="DIR",
+                       help="parameter files DIR/<service>.toml (e.g. deploy/config/demo)")
+    start.add_argument("--set", action="append", default=[], dest="overrides",
+                       metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
+    start.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    start.add_argument("--wait", type=float, default=60.0, metavar="SECONDS",
+                       help="wait this long for the services' liveliness (0: do not wait)")
+    start.add_argument("--foreground", action="store_true",
+                       help="run the supervisor in this process (Ctrl-C stops everything)")
+    start.set_defaults(handler=command_start)
+
+    stop = with_run_dir(commands.add_parser("stop", help="stop the supervisor and its children"))
+    stop.add_argument("--timeout", type=float, default=40.0)
+    stop.set_defaults(handler=command_stop)
+
+    status = with_run_dir(commands.add_parser("status", help="pids, restarts, liveliness and stats"))
+    status.add_argument("--json", action="store_true", help="machine-readable output")
+    status.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the network")
+    status.add_argument("--no-network", action="store_true", help="only the run folder, no Zenoh")
+    status.set_defaults(handler=command_status)
+
+    supervise_command = with_run_dir(commands.add_parser(
+        "supervise", help="(internal) run the supervisor of a run folder's launch.json"))
+    supervise_command.set_defaults(handler=lambda args: supervise(Path(args.run_dir).resolve(),
+                                                                  SupervisorSettings()))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return args.handler(args)

@@ -1,0 +1,571 @@
+"""The demo: a simulated robot finds a tennis ball and drives up to it (the paper's basic run).
+
+    python -m deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS]
+
+Starts a router, the simulator (``chase`` scenario, real-time pacing), the detector, the
+locator and the follower as separate processes under the supervisor (``python -m deploy``),
+with the parameter files of ``deploy/config/demo``. Once every service is alive it restarts the
+scenario and watches: the run ends when the robot has reached the ball (ground truth: robot
+centre within 0.35 m of the ball's centre and facing it within 10 degrees, held for 1 s of
+simulated time) or when the time limit (wall seconds) is over.
+
+Into the run folder go the services' logs, ``video.mp4`` (the detector's annotated camera
+frames, ``image_out``, with the locator's 3D estimate written on them), ``trajectory.png``
+(the ball in the camera frame over time and the robot's path, like the paper's Fig. 8),
+``velocity.png`` (linear and angular velocity over time, like its Fig. 6), ``frame.png`` and
+``summary.json``. Exit status 0 when the ball was reached, 1 otherwise.
+
+Latency is measured here, by wall-clock arrival times at this program's own subscriber: the
+simulator's header stamps are *simulated* time, so they cannot be compared with the wall
+clock. Every message derived from a frame carries the frame's ``seq``; the latency of a
+``detected_ball_3d`` is its arrival time minus the arrival time of the ``camera/image_raw``
+with the same ``seq``; the same for the first ``cmd_vel`` carrying that ``seq`` (which also
+includes the wait for the follower's 10 Hz timer).
+"""
+
+import argparse
+import json
+import math
+import os
+import queue
+import signal
+import socket
+import sys
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+from common import keys as key_table
+from common.keys import Keys
+from common.messages import MessageError, decode
+from common.session import ArgumentParser, open_session
+from deploy.cli import LaunchError, launch, parse_service_overrides
+from deploy.supervisor import REPO, ChildSpec
+
+DEMO_CONFIG = REPO / "deploy" / "config" / "demo"
+# Children in start order: the simulator last, so the pipeline is ready for its first frame.
+DEMO_SERVICES = ("detector", "locator", "follower", "simulator")
+# Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
+# detector compute the colour mask for nobody).
+COUNTED_KEYS = (key_table.IMAGE_RAW, key_table.CAMERA_INFO, key_table.DETECTED_BALL,
+                key_table.DETECTED_BALLS, key_table.DETECTED_BALL_3D, key_table.CMD_VEL,
+                key_table.IMAGE_OUT, key_table.CLOCK, key_table.GROUND_TRUTH)
+
+
+def wrap_angle(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def percentile(values: list[float], q: float) -> float | None:
+    return float(np.percentile(values, q)) if values else None
+
+
+def pick_port(preferred: int) -> int:
+    """``preferred`` if nothing listens there, else (or for 0) a free port."""
+    with socket.socket() as probe:
+        try:
+            probe.bind(("127.0.0.1", preferred))
+            return probe.getsockname()[1]
+        except OSError:
+            pass
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+class Goal:
+    """The referee: has the robot reached the ball (distance, heading, held for ``hold`` s)?"""
+
+    def __init__(self, distance: float, heading_degrees: float, hold: float):
+        self.distance = distance
+        self.heading = math.radians(heading_degrees)
+        self.hold = hold
+        self.since: float | None = None
+        self.reached_at: float | None = None
+
+    @staticmethod
+    def errors(truth: dict) -> tuple[float, float]:
+        """(robot centre to nearest ball's centre on the floor, heading error) in m and rad."""
+        robot = truth["robot"]
+        best = None
+        for ball in truth["balls"]:
+            dx, dy = ball["position"][0] - robot["x"], ball["position"][1] - robot["y"]
+            candidate = (math.hypot(dx, dy), abs(wrap_angle(math.atan2(dy, dx) - robot["yaw"])))
+            best = candidate if best is None or candidate[0] < best[0] else best
+        return best if best is not None else (math.inf, math.pi)
+
+    def update(self, t: float, truth: dict) -> bool:
+        distance, heading = self.errors(truth)
+        if distance <= self.distance and heading <= self.heading:
+            self.since = t if self.since is None else self.since
+            if t - self.since >= self.hold and self.reached_at is None:
+                self.reached_at = self.since
+        else:
+            self.since = None
+        return self.reached_at is not None
+
+
+class VideoWriter(threading.Thread):
+    """Writes ``image_out`` frames (with the 3D estimate of the same frame) to an mp4 file.
+
+    Frames come from a bounded queue so the subscriber callback never blocks; a frame that
+    skips sequence numbers (the detector dropped frames under load) is repeated so the video
+    keeps the simulation's timing."""
+
+    def __init__(self, path: Path, fps: float, estimates: dict):
+        super().__init__(name="demo-video", daemon=True)
+        self.path = path
+        self.fps = fps
+        self.frames: queue.Queue = queue.Queue(maxsize=60)
+        self.estimates = estimates
+        self.written = 0
+        self.picture = None
+        self.picture_distance = 0.6  # frame.png: the first frame with the ball this close
+        self._writer = None
+        self._last_seq = None
+        self.failed = 0
+        self.last_image = None
+
+    def offer(self, message: dict) -> None:
+        try:
+            self.frames.put_nowait(message)
+        except queue.Full:
+            pass
+
+    def run(self) -> None:
+        import cv2
+
+        from common.images import image_to_bgr
+
+        while True:
+            message = self.frames.get()
+            if message is None:
+                break
+            try:
+                self._write(message, cv2, image_to_bgr)
+            except Exception as error:  # one bad frame must not end the video
+                if not self.failed:
+                    print(f"demo: video frame skipped: {error!r}", file=sys.stderr)
+                self.failed += 1
+        if self._writer is not None:
+            self._writer.release()
+
+    def _write(self, message: dict, cv2, image_to_bgr) -> None:
+        image = np.array(image_to_bgr(message))  # a writable copy: the overlay draws on it
+        seq = message["header"]["seq"]
+        estimate = self.estimates.get(seq)
+        if estimate is not None:
+            text = (f"ball x {estimate['x']:+.2f}  y {estimate['y']:+.2f}  z {estimate['z']:.2f}  "
+                    f"d {estimate['distance']:.2f} m")
+            height = image.shape[0]
+            cv2.rectangle(image, (0, height - 30), (image.shape[1], height), (0, 0, 0), -1)
+            cv2.putText(image, text, (10, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
+                        (255, 255, 255), 1, cv2.LINE_AA)
+            if estimate["distance"] <= self.picture_distance and self.picture is None:
+                self.picture = image.copy()
+        if self._writer is None:
+            height, width = image.shape[:2]
+            self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"),
+                                           self.fps, (width, height))
+        repeats = 1 if self._last_seq is None else max(1, min(seq - self._last_seq, 10))
+        self._last_seq = seq
+        for _ in range(repeats):
+            self._writer.write(image)
+            self.written += 1
+        self.last_image = image
+
+    def finish(self) -> None:
+        try:
+            self.frames.put(None, timeout=10)
+        except queue.Full:
+            pass
+        self.join(30)
+
+
+class Observer:
+    """This program's own subscriber: counts, arrival times, data for the figures, the goal."""
+
+    def __init__(self, session, namespace: str, goal: Goal, video: VideoWriter | None):
+        self.keys = Keys(namespace)
+        self.goal = goal
+        self.video = video
+        self.lock = threading.Lock()
+        self.counts = {key: 0 for key in COUNTED_KEYS if key != key_table.IMAGE_OUT or video}
+        self.image_arrival: dict[int, float] = {}
+        self.ball_arrival: dict[int, float] = {}
+        self.command_arrival: dict[int, float] = {}
+        self.estimates: list[tuple[float, dict]] = []  # (sim stamp s, Ball3D)
+        self.estimate_by_seq: dict[int, dict] = video.estimates if video else {}
+        self.commands: list[tuple[float, dict]] = []
+        self.truths: list[tuple[float, dict]] = []
+        self.latest_truth: tuple[float, float, dict] | None = None  # (sim s, wall arrival, truth)
+        self.start: float | None = None  # sim time at which the scenario (re)started
+        self.reached = threading.Event()
+        self.simulator_stats: dict = {}
+        self.stats: dict[str, dict] = {}
+        self._entities = []
+        handlers = {key_table.IMAGE_RAW: self._on_image, key_table.DETECTED_BALL_3D: self._on_ball,
+                    key_table.CMD_VEL: self._on_command, key_table.GROUND_TRUTH: self._on_truth,
+                    key_table.IMAGE_OUT: self._on_image_out}
+        for key in self.counts:
+            self._entities.append(session.declare_subscriber(
+                self.keys(key), self._counting(key, handlers.get(key))))
+        self._entities.append(session.declare_subscriber(self.keys("*/stats"), self._on_stats))
+
+    def close(self) -> None:
+        for entity in self._entities:
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+
+    def _counting(self, key: str, handler):
+        def on_sample(sample):
+            arrival = time.monotonic()
+            with self.lock:
+                self.counts[key] += 1
+            if handler is not None:
+                try:
+                    handler(sample.payload.to_bytes(), arrival)
+                except (MessageError, KeyError, TypeError, ValueError):
+                    pass
+        return on_sample
+
+    def _on_image(self, payload: bytes, arrival: float) -> None:
+        seq = msgpack.unpackb(payload, raw=False)["header"]["seq"]  # only the header is needed
+        with self.lock:
+            self.image_arrival.setdefault(seq, arrival)
+
+    def _on_ball(self, payload: bytes, arrival: float) -> None:
+        ball = decode("Ball3D", payload)
+        seq = ball["header"]["seq"]
+        with self.lock:
+            self.ball_arrival.setdefault(seq, arrival)
+            self.estimate_by_seq[seq] = ball
+            if self.start is not None:
+                self.estimates.append((ball["header"]["stamp"] / 1e9 - self.start, ball))
+
+    def _sim_now(self, arrival: float) -> float | None:
+        if self.latest_truth is None:
+            return None
+        stamp, wall, _ = self.latest_truth
+        return stamp + (arrival - wall)
+
+    def _on_command(self, payload: bytes, arrival: float) -> None:
+        twist = decode("Twist", payload)
+        with self.lock:
+            now = self._sim_now(arrival)
+            tick = twist.get("time")
+            # The follower's tick time when it runs on simulated time, else the arrival time.
+            t = tick / 1e9 if isinstance(tick, int) and now is not None and abs(tick / 1e9 - now) < 5 else now
+            if twist.get("mode") != "search":
+                self.command_arrival.setdefault(twist["header"]["seq"], arrival)
+            if self.start is not None and t is not None:
+                self.commands.append((t - self.start, twist))
+
+    def _on_truth(self, payload: bytes, arrival: float) -> None:
+        truth = decode("GroundTruth", payload)
+        stamp = truth["header"]["stamp"] / 1e9
+        with self.lock:
+            self.latest_truth = (stamp, arrival, truth)
+            if self.start is None:
+                return
+            t = stamp - self.start
+            self.truths.append((t, truth))
+            if self.goal.update(t, truth):
+                self.reached.set()
+
+    def _on_image_out(self, payload: bytes, arrival: float) -> None:
+        self.video.offer(decode("Image", payload))
+
+    def _on_stats(self, sample) -> None:
+        try:
+            stats = decode("Stats", sample.payload.to_bytes())
+        except MessageError:
+            return
+        with self.lock:
+            self.stats[stats["service"]] = stats
+
+    def begin(self, sim_time: float) -> None:
+        """The scenario (re)started at ``sim_time``: counts and figures start from here."""
+        with self.lock:
+            self.start = sim_time
+            self.counts = {key: 0 for key in self.counts}
+            self.ball_arrival.clear()
+            self.command_arrival.clear()
+            self.estimates.clear()
+            self.commands.clear()
+            self.truths.clear()
+
+    def latencies(self) -> dict:
+        with self.lock:
+            result = {}
+            for name, arrivals in (("detected_ball_3d", self.ball_arrival), ("cmd_vel", self.command_arrival)):
+                values = [1000 * (arrival - self.image_arrival[seq]) for seq, arrival in arrivals.items()
+                          if seq in self.image_arrival and arrival >= self.image_arrival[seq]]
+                result[name] = {"p50_ms": percentile(values, 50), "p99_ms": percentile(values, 99),
+                                "count": len(values)}
+            return result
+
+
+def wait_until(predicate, timeout: float, stop: threading.Event) -> bool:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline or stop.wait(0.05):
+            return False
+    return True
+
+
+def run(args) -> int:
+    run_dir = Path(args.run_dir or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    port = pick_port(args.port)
+    endpoint = f"tcp/127.0.0.1:{port}"
+    config_dir = Path(args.config_dir).resolve()
+    overrides = parse_service_overrides(args.overrides, list(DEMO_SERVICES))
+    python = sys.executable
+    specs = [ChildSpec("router", [python, "-m", "common.cli", "router", "--listen", endpoint], port=port)]
+    for name in DEMO_SERVICES:
+        argv = [python, "-m", f"services.{name}", "--connect", endpoint]
+        if args.namespace:
+            argv += ["--namespace", args.namespace]
+        if (config_dir / f"{name}.toml").is_file():
+            argv += ["--config", str(config_dir / f"{name}.toml")]
+        for override in overrides[name]:
+            argv += ["--set", override]
+        specs.append(ChildSpec(name, argv))
+    info = {"connect": [endpoint], "namespace": args.namespace, "services": list(DEMO_SERVICES),
+            "zenoh_config": None, "router": True}
+
+    stop = threading.Event()
+
+    def on_signal(*_):
+        if stop.is_set():  # a second Ctrl-C: stop waiting for anything
+            raise KeyboardInterrupt
+        stop.set()
+
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, on_signal)
+
+    print(f"balltrack demo: router on {endpoint}, run folder {run_dir}", flush=True)
+    print(f"  watch it from another terminal: balltrack status --connect {endpoint}", flush=True)
+    goal = Goal(args.reach_distance, args.reach_heading, args.hold)
+    supervisor = None
+    session = observer = video = None
+    reached = False
+    started_wall = time.monotonic()
+    result: dict = {}
+    try:
+        try:
+            supervisor = launch(run_dir, specs, info, wait=args.start_timeout, tie_to_parent=True)
+        except LaunchError as error:
+            print(f"demo: {error}", file=sys.stderr)
+            return 1
+        session = open_session([endpoint], open_timeout=10)
+        video = None if args.no_video else VideoWriter(run_dir / "video.mp4", 30.0, {})
+        if video is not None:
+            video.start()
+        observer = Observer(session, args.namespace, goal, video)
+        # The pipeline is up once the detector answers frames; then the scenario restarts so the
+        # run starts with every service ready.
+        if not wait_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
+                          and observer.latest_truth is not None, args.start_timeout, stop):
+            if not stop.is_set():
+                print("demo: the pipeline produced no detected_balls in time", file=sys.stderr)
+            return 1
+        from services.simulator.control import send_command
+
+        reply = send_command(session, {"op": "reset"}, args.namespace)
+        if not reply["ok"]:
+            print(f"demo: sim/control reset failed: {reply.get('error')}", file=sys.stderr)
+            return 1
+        seen = observer.counts[key_table.GROUND_TRUTH]
+        wait_until(lambda: observer.counts[key_table.GROUND_TRUTH] > seen, 10, stop)
+        observer.begin(observer.latest_truth[0])
+        print(f"demo: all services alive; scenario restarted; chasing (limit {args.time_limit:.0f} s)",
+              flush=True)
+        chase_wall = time.monotonic()
+        next_report = chase_wall + 5
+        while not observer.reached.is_set() and not stop.is_set():
+            now = time.monotonic()
+            if now - chase_wall >= args.time_limit:
+                break
+            if now >= next_report:
+                next_report += 5
+                with observer.lock:
+                    if observer.truths:
+                        t, truth = observer.truths[-1]
+                        distance, heading = Goal.errors(truth)
+                        print(f"  t={t:5.1f} s  distance {distance:.2f} m  heading error "
+                              f"{math.degrees(heading):5.1f} deg", flush=True)
+            observer.reached.wait(0.2)
+        reached = observer.reached.is_set()
+        chase_seconds = time.monotonic() - chase_wall
+        with observer.lock:
+            final_t, final_truth = observer.truths[-1] if observer.truths else (0.0, None)
+        result = summarise(args, observer, goal, reached, final_t, final_truth, chase_seconds, endpoint, run_dir)
+        result["interrupted"] = stop.is_set() and not reached
+    finally:
+        if observer is not None:
+            observer.close()
+        if session is not None:
+            session.close()
+        if supervisor is not None:
+            code = supervisor.stop()
+            if code != 0:
+                print(f"demo: the supervisor stopped with status {code} (see {run_dir}/supervisor.log)",
+                      file=sys.stderr)
+            result["supervisor_exit"] = code
+        if video is not None:
+            video.finish()
+    write_outputs(run_dir, observer, video, result)
+    print_summary(result)
+    print(f"  total wall time {time.monotonic() - started_wall:.1f} s", flush=True)
+    return 0 if reached else 1
+
+
+def summarise(args, observer: Observer, goal: Goal, reached: bool, final_t: float, final_truth,
+              chase_seconds: float, endpoint: str, run_dir: Path) -> dict:
+    distance, heading = Goal.errors(final_truth) if final_truth else (None, None)
+    camera_distance = None
+    if final_truth and final_truth["balls"]:
+        camera_distance = math.dist([0, 0, 0], final_truth["balls"][0]["in_camera"])
+    with observer.lock:
+        counts = dict(observer.counts)
+        stats = dict(observer.stats)
+    rates = {key: round(count / chase_seconds, 2) if chase_seconds > 0 else None for key, count in counts.items()}
+    simulator = stats.get("simulator", {})
+    return {
+        "reached": reached,
+        "time_to_reach_s": goal.reached_at,
+        "time_limit_s": args.time_limit,
+        "criteria": {"distance_m": args.reach_distance, "heading_deg": args.reach_heading, "hold_s": args.hold},
+        "chase_simulated_s": final_t,
+        "chase_wall_s": chase_seconds,
+        "final_distance_m": distance,
+        "final_camera_distance_m": camera_distance,
+        "final_heading_error_deg": math.degrees(heading) if heading is not None else None,
+        "final_robot": final_truth["robot"] if final_truth else None,
+        "latency_ms": observer.latencies(),
+        "messages": counts,
+        "messages_per_s": rates,
+        "real_time_factor": simulator.get("real_time_factor"),
+        "service_stats": stats,
+        "endpoint": endpoint,
+        "run_dir": str(run_dir),
+    }
+
+
+def write_outputs(run_dir: Path, observer: Observer | None, video: VideoWriter | None, result: dict) -> None:
+    files = {}
+    if observer is not None and (observer.truths or observer.estimates):
+        from deploy.figures import plot_trajectory, plot_velocity
+
+        with observer.lock:
+            estimates, truths, commands = list(observer.estimates), list(observer.truths), list(observer.commands)
+        title = "reached" if result.get("reached") else "not reached"
+        if result.get("time_to_reach_s") is not None:
+            title = f"reached in {result['time_to_reach_s']:.1f} s"
+        plot_trajectory(run_dir / "trajectory.png", estimates, truths, f"balltrack demo: {title}")
+        plot_velocity(run_dir / "velocity.png", commands, truths, f"balltrack demo: {title}")
+        files.update(trajectory=str(run_dir / "trajectory.png"), velocity=str(run_dir / "velocity.png"))
+    if video is not None and video.written:
+        import cv2
+
+        files["video"] = str(run_dir / "video.mp4")
+        picture = video.picture if video.picture is not None else video.last_image
+        if picture is not None:
+            cv2.imwrite(str(run_dir / "frame.png"), picture)
+            files["frame"] = str(run_dir / "frame.png")
+            if "trajectory" in files:
+                overview = overview_image(picture, cv2.imread(files["trajectory"]))
+                cv2.imwrite(str(run_dir / "overview.png"), overview, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+                files["overview"] = str(run_dir / "overview.png")
+        result["video_frames"] = video.written
+    result["files"] = files
+    (run_dir / "summary.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    files["summary"] = str(run_dir / "summary.json")
+
+
+def overview_image(frame: np.ndarray, trajectory: np.ndarray, height: int = 300) -> np.ndarray:
+    """The camera frame with its overlay beside the trajectory figure, both ``height`` px high
+    (the README's picture)."""
+    import cv2
+
+    def scaled(image):
+        return cv2.resize(image, (round(image.shape[1] * height / image.shape[0]), height),
+                          interpolation=cv2.INTER_AREA)
+
+    gap = np.full((height, 8, 3), 255, np.uint8)
+    return np.hstack([scaled(frame), gap, scaled(trajectory)])
+
+
+def _ms(value) -> str:
+    return "-" if value is None else f"{value:.1f} ms"
+
+
+def print_summary(result: dict) -> None:
+    if not result.get("messages"):
+        return
+    if result["reached"]:
+        print(f"\nREACHED the ball in {result['time_to_reach_s']:.1f} s of simulated time", flush=True)
+    elif result.get("interrupted"):
+        print(f"\nINTERRUPTED after {result['chase_wall_s']:.0f} s: not reached", flush=True)
+    else:
+        print(f"\nNOT reached within {result['time_limit_s']:.0f} s", flush=True)
+    if result["final_distance_m"] is not None:
+        print(f"  final distance {result['final_distance_m']:.3f} m (robot centre to ball centre; "
+              f"camera to ball {result['final_camera_distance_m']:.3f} m), heading error "
+              f"{result['final_heading_error_deg']:.1f} deg")
+    if result.get("real_time_factor") is not None:
+        print(f"  simulation real-time factor {result['real_time_factor']:.2f}")
+    for name, figures in result["latency_ms"].items():
+        print(f"  latency frame -> {name:<16} p50 {_ms(figures['p50_ms'])}, p99 {_ms(figures['p99_ms'])} "
+              f"({figures['count']} frames)")
+    print("  messages received by the demo (count, per second):")
+    for key, count in result["messages"].items():
+        print(f"    {key:<20} {count:>6} {result['messages_per_s'][key] or 0:>7.1f}/s")
+    for name, path in result.get("files", {}).items():
+        print(f"  {name:<10} {path}")
+    sys.stdout.flush()
+
+
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="python -m deploy.demo", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--time-limit", type=float, default=60.0, metavar="SECONDS",
+                        help="give up after this many wall seconds of chase (default 60)")
+    parser.add_argument("--run-dir", metavar="DIR", help="default runs/demo-YYYYmmdd-HHMMSS")
+    parser.add_argument("--port", type=int, default=7447,
+                        help="the router's port on 127.0.0.1 (a free one if taken, or 0; default 7447)")
+    parser.add_argument("--namespace", default="", metavar="NS")
+    parser.add_argument("--config-dir", default=str(DEMO_CONFIG), metavar="DIR",
+                        help="parameter files <service>.toml (default deploy/config/demo)")
+    parser.add_argument("--set", action="append", default=[], dest="overrides",
+                        metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
+    parser.add_argument("--reach-distance", type=float, default=0.35, metavar="M")
+    parser.add_argument("--reach-heading", type=float, default=10.0, metavar="DEG")
+    parser.add_argument("--hold", type=float, default=1.0, metavar="SECONDS",
+                        help="simulated seconds the goal must hold (default 1)")
+    parser.add_argument("--start-timeout", type=float, default=90.0, metavar="SECONDS",
+                        help="how long the services may take to come up (default 90)")
+    parser.add_argument("--no-video", action="store_true", help="no video.mp4 (saves CPU)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        Keys(args.namespace)
+        return run(args)
+    except (LaunchError, ValueError) as error:
+        print(f"demo: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    sys.exit(main())

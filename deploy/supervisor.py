@@ -1,0 +1,367 @@
+"""The supervisor: keeps a set of child processes running, everything in one run folder.
+
+A run folder holds::
+
+    launch.json        what to run (written by ``python -m deploy start``): children in order
+    supervisor.pid     the supervisor's pid, while it runs
+    supervisor.log     what the supervisor did: starts, exits, restarts, stop
+    status.json        live state: per child pid, state, restarts, last exit status
+    <child>.pid        a child's pid, while it runs
+    <child>.log        a child's output (stdout and stderr), appended across restarts
+
+Rules:
+
+* Children start in order. A child with a ``port`` (the router) must accept TCP connections
+  before the next one starts, so services find their router at once.
+* A child that exits with status 0 was asked to stop (services and the router exit 0 only on
+  SIGINT/SIGTERM): it is not restarted. Status 2 is a usage or configuration error that a
+  restart cannot fix: the child is marked ``failed``. Any other exit (a crash, a signal such as
+  SIGKILL, status 1 when the router could not be reached) is restarted after a backoff that
+  doubles from ``backoff_initial`` to ``backoff_max`` seconds and resets once the child has run
+  ``stable_after`` seconds; ``give_up_after`` quick failures in a row mark it ``failed``.
+* SIGINT or SIGTERM to the supervisor stops everything: SIGTERM to the services (in reverse
+  order), then to the router, each given ``stop_timeout`` seconds before SIGKILL. The
+  supervisor exits 0 when every child exited 0, 1 otherwise; pid files are removed.
+* Children run in their own session (a Ctrl-C in a terminal reaches the supervisor only, which
+  then stops them in order) and get SIGTERM from the kernel if the supervisor itself dies.
+"""
+
+import ctypes
+import json
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+LOG = logging.getLogger("supervisor")
+
+# Child states, as written to status.json.
+STARTING, RUNNING, BACKOFF, EXITED, FAILED, STOPPED = (
+    "starting", "running", "backoff", "exited", "failed", "stopped")
+
+
+@dataclass
+class ChildSpec:
+    """One process to keep running: its name (``router``, ``detector``...) and command line."""
+
+    name: str
+    argv: list[str]
+    port: int | None = None  # wait for this local TCP port to accept before starting the next
+    env: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class SupervisorSettings:
+    backoff_initial: float = 0.5
+    backoff_max: float = 10.0
+    stable_after: float = 10.0
+    give_up_after: int = 5
+    stop_timeout: float = 15.0
+    ready_timeout: float = 20.0
+
+
+def describe_exit(returncode: int | None) -> str:
+    if returncode is None:
+        return "running"
+    if returncode < 0:
+        try:
+            return f"killed by {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"killed by signal {-returncode}"
+    return f"exit {returncode}"
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # A zombie is not alive; /proc tells (Linux), elsewhere trust kill(0).
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        return state != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def child_environment(extra: dict[str, str] | None = None) -> dict[str, str]:
+    environment = dict(os.environ)
+    environment.setdefault("MUJOCO_GL", "egl")
+    environment["PYTHONUNBUFFERED"] = "1"
+    # The repository on the path, so children run even without the editable install.
+    environment["PYTHONPATH"] = os.pathsep.join(
+        [str(REPO)] + [item for item in environment.get("PYTHONPATH", "").split(os.pathsep) if item])
+    environment.update(extra or {})
+    return environment
+
+
+def die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the supervisor dies (Linux prctl)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def write_json_atomically(path: Path, data: dict) -> None:
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    temporary.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(temporary, path)
+
+
+class Child:
+    def __init__(self, spec: ChildSpec, run_dir: Path):
+        self.spec = spec
+        self.run_dir = run_dir
+        self.popen: subprocess.Popen | None = None
+        self.state = STARTING
+        self.restarts = 0
+        self.quick_failures = 0
+        self.last_exit: int | None = None
+        self.started_at: float | None = None  # time.monotonic() of the current start
+        self.started_wall: float | None = None
+        self.next_start = 0.0
+        self._log_handle = None
+
+    @property
+    def log_path(self) -> Path:
+        return self.run_dir / f"{self.spec.name}.log"
+
+    @property
+    def pid_path(self) -> Path:
+        return self.run_dir / f"{self.spec.name}.pid"
+
+    @property
+    def pid(self) -> int | None:
+        return self.popen.pid if self.popen is not None and self.popen.poll() is None else None
+
+    def start(self) -> None:
+        self._log_handle = open(self.log_path, "ab")
+        stamp = time.strftime("%Y-%m-%d %H:%M:%S")
+        self._log_handle.write(f"=== {stamp} start #{self.restarts + 1}: "
+                               f"{' '.join(self.spec.argv)}\n".encode())
+        self._log_handle.flush()
+        self.popen = subprocess.Popen(
+            self.spec.argv, stdout=self._log_handle, stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL, cwd=REPO, env=child_environment(self.spec.env),
+            start_new_session=True, preexec_fn=die_with_parent if sys.platform == "linux" else None)
+        self.pid_path.write_text(f"{self.popen.pid}\n")
+        self.started_at = time.monotonic()
+        self.started_wall = time.time()
+        self.state = RUNNING
+
+    def reap(self) -> int | None:
+        """The exit status if the child has exited since the last call (pid file removed)."""
+        if self.popen is None or self.state not in (RUNNING, STARTING):
+            return None
+        returncode = self.popen.poll()
+        if returncode is None:
+            return None
+        self._closed(returncode)
+        return returncode
+
+    def _closed(self, returncode: int) -> None:
+        self.last_exit = returncode
+        self.pid_path.unlink(missing_ok=True)
+        if self._log_handle is not None:
+            self._log_handle.close()
+            self._log_handle = None
+
+    def terminate(self) -> None:
+        if self.popen is not None and self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+
+    def wait_stopped(self, deadline: float) -> int | None:
+        """Wait for a child sent SIGTERM; SIGKILL at ``deadline``. Its exit status."""
+        if self.popen is None or self.state not in (RUNNING, STARTING):
+            return None
+        try:
+            returncode = self.popen.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            LOG.warning("%s ignored SIGTERM; sending SIGKILL", self.spec.name)
+            self.popen.kill()
+            returncode = self.popen.wait()
+        self._closed(returncode)
+        self.state = STOPPED
+        return returncode
+
+    def status(self) -> dict:
+        return {"pid": self.pid, "state": self.state, "restarts": self.restarts,
+                "last_exit": self.last_exit,
+                "last_exit_text": describe_exit(self.last_exit) if self.last_exit is not None else None,
+                "started": self.started_wall, "log": str(self.log_path), "argv": self.spec.argv}
+
+
+class Supervisor:
+    """Starts ``specs`` in order and keeps them running until ``stop`` is set."""
+
+    def __init__(self, run_dir: Path, specs: list[ChildSpec],
+                 settings: SupervisorSettings | None = None, info: dict | None = None):
+        self.run_dir = Path(run_dir)
+        self.settings = settings or SupervisorSettings()
+        self.children = [Child(spec, self.run_dir) for spec in specs]
+        self.info = dict(info or {})
+        self.state = STARTING
+        self.exit_code: int | None = None
+        self.stop = threading.Event()
+
+    # -- status -------------------------------------------------------------------------
+    def write_status(self) -> None:
+        write_json_atomically(self.run_dir / "status.json", {
+            "supervisor": {"pid": os.getpid(), "state": self.state, "exit_code": self.exit_code,
+                           "updated": time.time(), **self.info},
+            "children": {child.spec.name: child.status() for child in self.children},
+        })
+
+    # -- running ------------------------------------------------------------------------
+    def _wait_for_port(self, child: Child) -> bool:
+        deadline = time.monotonic() + self.settings.ready_timeout
+        while time.monotonic() < deadline and not self.stop.is_set():
+            if child.popen.poll() is not None:
+                return False
+            try:
+                with socket.create_connection(("127.0.0.1", child.spec.port), timeout=0.5):
+                    return True
+            except OSError:
+                self.stop.wait(0.1)
+        return False
+
+    def _start(self, child: Child) -> None:
+        child.start()
+        LOG.info("started %s (pid %d)%s", child.spec.name, child.popen.pid,
+                 f", restart {child.restarts}" if child.restarts else "")
+        if child.spec.port and not self._wait_for_port(child):
+            if not self.stop.is_set():
+                LOG.warning("%s is not accepting connections on port %d", child.spec.name,
+                            child.spec.port)
+        self.write_status()
+
+    def _on_exit(self, child: Child, returncode: int) -> None:
+        name, settings = child.spec.name, self.settings
+        ran = time.monotonic() - (child.started_at or time.monotonic())
+        if returncode == 0:
+            child.state = EXITED
+            LOG.info("%s exited 0 (asked to stop): not restarted", name)
+        elif returncode == 2:
+            child.state = FAILED
+            LOG.error("%s exited 2 (usage or configuration error, see %s): not restarted",
+                      name, child.log_path)
+        else:
+            child.quick_failures = child.quick_failures + 1 if ran < settings.stable_after else 1
+            if child.quick_failures > settings.give_up_after:
+                child.state = FAILED
+                LOG.error("%s %s; %d quick failures in a row: giving up (see %s)", name,
+                          describe_exit(returncode), child.quick_failures - 1, child.log_path)
+            else:
+                delay = min(settings.backoff_initial * 2 ** (child.quick_failures - 1),
+                            settings.backoff_max)
+                child.state = BACKOFF
+                child.next_start = time.monotonic() + delay
+                LOG.warning("%s %s after %.1f s; restart %d in %.1f s", name,
+                            describe_exit(returncode), ran, child.restarts + 1, delay)
+        self.write_status()
+
+    def _stop_children(self) -> bool:
+        """SIGTERM to services (reverse order), then to the rest; True if all exited 0."""
+        self.state = "stopping"
+        self.write_status()
+        clean = True
+        routers = [child for child in self.children if child.spec.port]
+        services = [child for child in reversed(self.children) if not child.spec.port]
+        for group in (services, routers):
+            for child in group:
+                child.terminate()
+            deadline = time.monotonic() + self.settings.stop_timeout
+            for child in group:
+                was_running = child.state in (RUNNING, STARTING)
+                returncode = child.wait_stopped(deadline)
+                if was_running:
+                    LOG.info("%s stopped (%s)", child.spec.name, describe_exit(returncode))
+                    clean = clean and returncode == 0
+                elif child.state == BACKOFF:
+                    child.state = STOPPED
+        return clean
+
+    def run(self) -> int:
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        pid_file = self.run_dir / "supervisor.pid"
+        pid_file.write_text(f"{os.getpid()}\n")
+        try:
+            self.write_status()
+            for child in self.children:
+                if self.stop.is_set():
+                    break
+                self._start(child)
+            if not self.stop.is_set():
+                self.state = RUNNING
+                self.write_status()
+                LOG.info("running %s", ", ".join(child.spec.name for child in self.children))
+            while not self.stop.is_set():
+                now = time.monotonic()
+                for child in self.children:
+                    returncode = child.reap()
+                    if returncode is not None:
+                        self._on_exit(child, returncode)
+                    elif child.state == BACKOFF and now >= child.next_start:
+                        child.restarts += 1
+                        self._start(child)
+                    elif (child.state == RUNNING and child.quick_failures
+                          and now - child.started_at >= self.settings.stable_after):
+                        child.quick_failures = 0
+                if all(child.state in (EXITED, FAILED) for child in self.children):
+                    LOG.info("no child left to supervise")
+                    break
+                self.stop.wait(0.1)
+            clean = self._stop_children()
+            failed = [child.spec.name for child in self.children if child.state == FAILED]
+            self.exit_code = 0 if clean and not failed else 1
+            self.state = "stopped"
+            LOG.info("stopped (exit %d)%s", self.exit_code,
+                     f"; failed: {', '.join(failed)}" if failed else "")
+            self.write_status()
+            return self.exit_code
+        finally:
+            for child in self.children:
+                if child.popen is not None and child.popen.poll() is None:
+                    child.popen.kill()
+                    child.popen.wait()
+                child.pid_path.unlink(missing_ok=True)
+            pid_file.unlink(missing_ok=True)
+
+
+def load_launch(run_dir: Path) -> tuple[list[ChildSpec], dict]:
+    data = json.loads((run_dir / "launch.json").read_text())
+    specs = [ChildSpec(**child) for child in data["children"]]
+    return specs, data.get("info", {})
+
+
+def save_launch(run_dir: Path, specs: list[ChildSpec], info: dict) -> None:
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomically(run_dir / "launch.json",
+                          {"children": [asdict(spec) for spec in specs], "info": info})
+
+
+def supervise(run_dir: Path, settings: SupervisorSettings | None = None, log_file: bool = False) -> int:
+    """Run a run folder's launch.json until SIGINT/SIGTERM (``python -m deploy supervise``, whose
+    stderr is supervisor.log, or ``start --foreground``, which logs to both with ``log_file``)."""
+    log_format = "%(asctime)s %(name)s %(levelname)s %(message)s"
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format=log_format)
+    if log_file:
+        handler = logging.FileHandler(Path(run_dir) / "supervisor.log")
+        handler.setFormatter(logging.Formatter(log_format))
+        logging.getLogger().addHandler(handler)
+    specs, info = load_launch(run_dir)
+    supervisor = Supervisor(run_dir, specs, settings, info)
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, lambda *_: supervisor.stop.set())
+    return supervisor.run()

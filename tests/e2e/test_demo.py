@@ -1,0 +1,36 @@
+"""The demo as the README's first command runs it: five processes, the robot reaches the ball."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tests.harness import REPO, free_port, process_environment
+
+pytestmark = pytest.mark.slow
+
+
+def test_demo_reaches_the_ball_and_writes_its_outputs(tmp_path):
+    run_dir = tmp_path / "demo"
+    # A generous limit: the chase takes ~18 s of simulated time, slower on a busy machine.
+    result = subprocess.run([sys.executable, "-m", "deploy.demo", "--run-dir", str(run_dir),
+                             "--port", str(free_port()), "--time-limit", "150"],
+                            cwd=REPO, env=process_environment(), capture_output=True, text=True,
+                            timeout=280)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert "REACHED the ball" in result.stdout
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["reached"] and summary["final_distance_m"] <= 0.35
+    assert abs(summary["final_heading_error_deg"]) <= 10
+    assert summary["supervisor_exit"] == 0, (run_dir / "supervisor.log").read_text()
+    for key in ("camera/image_raw", "detected_ball", "detected_ball_3d", "cmd_vel", "image_out",
+                "sim/ground_truth"):
+        assert summary["messages"][key] > 0, key
+    for name in ("detected_ball_3d", "cmd_vel"):
+        latency = summary["latency_ms"][name]
+        assert latency["count"] > 0 and 0 < latency["p50_ms"] <= latency["p99_ms"], (name, latency)
+    for name in ("video.mp4", "trajectory.png", "velocity.png", "frame.png", "overview.png"):
+        assert (run_dir / name).stat().st_size > 1000, name
+    assert not list(run_dir.glob("*.pid"))

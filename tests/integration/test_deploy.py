@@ -1,0 +1,156 @@
+"""The supervisor and launcher (``python -m deploy``) and the subscriber example, as users run them.
+
+Real processes on a free port in a temporary run folder; every wait is on a condition (a file's
+content, a liveliness token, a line of output) with a deadline.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from common.messages import encode, header
+from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment
+
+SERVICES = ["detector", "locator", "follower"]
+
+
+def deploy(*arguments: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "deploy", *arguments], cwd=REPO, env=process_environment(),
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def read_status(run_dir: Path) -> dict:
+    try:
+        return json.loads((run_dir / "status.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def wait_for(predicate, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while True:
+        result = predicate()
+        if result:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.05)  # polling a file the supervisor rewrites; the deadline bounds it
+
+
+def pid_running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def started(tmp_path):
+    """Router + detector + locator + follower under a background supervisor; stopped at the end."""
+    run_dir = tmp_path / "run"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    result = deploy("start", "--router", "--listen", endpoint, "--services", ",".join(SERVICES),
+                    "--run-dir", str(run_dir), "--set", "follower.rate_hz=5", "--wait", "60")
+    assert result.returncode == 0, result.stdout + result.stderr
+    yield run_dir, endpoint
+    supervisor = read_status(run_dir).get("supervisor", {}).get("pid")
+    if supervisor and pid_running(supervisor):  # the test failed before its own stop
+        deploy("stop", "--run-dir", str(run_dir))
+
+
+def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
+    run_dir, endpoint = started
+    result = deploy("status", "--run-dir", str(run_dir), "--json")
+    assert result.returncode == 0, result.stdout + result.stderr
+    status = json.loads(result.stdout)
+    assert status["supervisor"]["running"]
+    assert status["children"]["router"]["running"]
+    for name in SERVICES:
+        child = status["children"][name]
+        assert child["running"] and child["alive"] and child["restarts"] == 0, (name, child)
+    # The --set reached the follower: its parameter file is the command line.
+    assert "rate_hz=5" in " ".join(status["children"]["follower"]["argv"])
+
+    session = client(endpoint)
+    try:
+        liveliness = Liveliness(session)
+        liveliness.wait("locator", alive=True, timeout=10)
+        old_pid = int((run_dir / "locator.pid").read_text())
+        os.kill(old_pid, signal.SIGKILL)
+        liveliness.wait("locator", alive=False, timeout=15)
+        child = wait_for(lambda: (lambda c: c if c.get("restarts") == 1 and c.get("state") == "running"
+                                  and c.get("pid") not in (None, old_pid) else None)(
+            read_status(run_dir).get("children", {}).get("locator", {})), 30, "the locator's restart")
+        assert child["last_exit"] == -signal.SIGKILL
+        liveliness.wait("locator", alive=True, timeout=30)
+    finally:
+        session.close()
+    assert "locator killed by SIGKILL" in (run_dir / "supervisor.log").read_text()
+
+    status = json.loads(deploy("status", "--run-dir", str(run_dir), "--json").stdout)
+    assert status["children"]["locator"]["alive"] and status["children"]["locator"]["restarts"] == 1
+    pids = [child["pid"] for child in status["children"].values()] + [status["supervisor"]["pid"]]
+
+    result = deploy("stop", "--run-dir", str(run_dir))
+    assert result.returncode == 0, result.stdout + result.stderr
+    final = read_status(run_dir)
+    assert final["supervisor"]["state"] == "stopped" and final["supervisor"]["exit_code"] == 0
+    for name, child in final["children"].items():
+        assert child["state"] == "stopped" and child["last_exit"] == 0, (name, child)
+    assert not list(run_dir.glob("*.pid"))
+    assert not [pid for pid in pids if pid_running(pid)]
+    # The locator's log holds both runs.
+    assert (run_dir / "locator.log").read_text().count("=== ") == 2
+
+
+def test_start_rejects_bad_options_and_a_bad_config(tmp_path):
+    result = deploy("start", "--services", "detector,camera", "--run-dir", str(tmp_path / "a"))
+    assert result.returncode == 2 and "unknown camera" in result.stderr
+    result = deploy("start", "--set", "max_size_thresh=0.3", "--run-dir", str(tmp_path / "b"))
+    assert result.returncode == 2 and "SERVICE.KEY=VALUE" in result.stderr
+    # A parameter the follower refuses: exit 2 is not restarted; start reports it and stops.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    run_dir = tmp_path / "c"
+    result = deploy("start", "--router", "--listen", endpoint, "--services", "follower",
+                    "--set", "follower.filter_value=1.5", "--run-dir", str(run_dir), "--wait", "30")
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "failed: follower" in result.stderr and "filter_value" in result.stderr
+    status = read_status(run_dir)
+    assert status["children"]["follower"]["state"] == "failed"
+    assert status["children"]["follower"]["restarts"] == 0
+    assert status["supervisor"]["state"] == "stopped"
+    assert not list(run_dir.glob("*.pid"))
+
+
+def test_example_subscriber_prints_ball_positions(router, session, tmp_path):
+    example = Process([sys.executable, str(REPO / "examples" / "subscribe_ball3d.py"), "--connect",
+                       router.endpoint, "--count", "2", "--validate"], tmp_path / "example.log")
+    try:
+        example.wait_for_output("listening on detected_ball_3d", 20)
+        publisher = session.declare_publisher("detected_ball_3d")
+        ball = {"header": {**header(123, 7), "frame_id": "camera_optical"},
+                "x": 0.1, "y": 0.05, "z": 1.5, "distance": 1.504}
+        deadline = time.monotonic() + 20
+        # Publish until the example has printed twice (its subscription reaches the router
+        # asynchronously, so the first samples may go nowhere).
+        while example.popen.poll() is None and time.monotonic() < deadline:
+            publisher.put(encode("Ball3D", ball))
+            try:
+                example.popen.wait(0.1)
+            except subprocess.TimeoutExpired:
+                pass
+        assert example.popen.wait(5) == 0, example.output()
+        assert "seq      7  x +0.100  y +0.050  z 1.500  distance 1.504 m" in example.output()
+        publisher.undeclare()
+    finally:
+        example.kill()

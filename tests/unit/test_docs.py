@@ -1,0 +1,62 @@
+"""README.md stays in step with the code: parameters, keys, messages, commands."""
+
+import dataclasses
+import re
+
+import pytest
+
+from common import keys as key_table
+from common.messages import SCHEMAS
+from deploy import params
+from tests.harness import REPO
+
+README = (REPO / "README.md").read_text()
+
+
+def section(service: str) -> str:
+    """The README's parameter table of one service (from its heading to the next)."""
+    match = re.search(rf"^#### {service} \(.*?(?=^#### |\Z|<!-- params:end)", README, re.M | re.S)
+    assert match, f"README.md has no parameter section for {service}"
+    return match.group(0)
+
+
+@pytest.mark.parametrize("service, module_name, class_name", params.CONFIGS)
+def test_every_config_field_is_in_the_readme(service, module_name, class_name):
+    table = section(service)
+    missing = [field.name for field in dataclasses.fields(params.config_class(module_name, class_name))
+               if f"| `{field.name}` |" not in table]
+    assert not missing, (f"README.md's {service} table lacks {missing}; "
+                         "run python -m deploy.params --write")
+
+
+@pytest.mark.parametrize("markers", list(params.blocks()), ids=["parameters", "keys"])
+def test_generated_tables_match_the_code(markers):
+    block = params.readme_block(README, *markers)
+    assert block is not None, f"README.md lacks the markers {markers}"
+    assert block == params.blocks()[markers], (
+        "README.md's generated tables (parameter names, types, defaults; keys) are out of step with "
+        "the code; run python -m deploy.params --write")
+
+
+def test_every_field_has_a_meaning():
+    for service, module_name, class_name in params.CONFIGS:
+        for name, _, _, meaning in params.rows(service, params.config_class(module_name, class_name)):
+            assert not meaning.startswith("see `services/"), f"{service}.{name} has no description"
+
+
+def test_every_key_and_message_is_documented():
+    for spec in key_table.TABLE:
+        assert f"`{spec.key}`" in README, f"key {spec.key} missing from README.md"
+    for name in SCHEMAS:
+        assert f"**{name}**" in README, f"message {name} missing from README.md"
+
+
+def test_quick_start_and_commands_are_documented():
+    for text in ("./deploy/demo.sh", "./deploy/test.sh", "balltrack router", "balltrack detect",
+                 "balltrack status", "balltrack echo", "balltrack hz", "balltrack config",
+                 "balltrack experiment", "python -m deploy start", "python -m deploy stop",
+                 "python -m deploy status", "examples/subscribe_ball3d.py", "--zenoh-config",
+                 "deploy/zenoh/router-cluster.json5", "deploy/zenoh/client.json5"):
+        assert text in README, f"{text} missing from README.md"
+    for script in ("deploy/demo.sh", "deploy/test.sh", "deploy/setup.sh", ".ci/run"):
+        assert (REPO / script).stat().st_mode & 0o111, f"{script} is not executable"
