@@ -43,6 +43,11 @@ class FollowerConfig:
     use_sim_time: bool = False
     search_toward_last_seen: bool = True
     reset_filter_on_reacquire: bool = True
+    # Among several balls, keep following the one already chased (nearest its last position in
+    # x and apparent size, within ``target_gate``) instead of whichever looks largest; False
+    # follows ``detected_ball`` (the largest) as the original node does.
+    keep_target: bool = True
+    target_gate: float = 0.3
 
     def __post_init__(self):
         self.rcv_timeout_secs = _number("rcv_timeout_secs", self.rcv_timeout_secs)
@@ -66,6 +71,10 @@ class FollowerConfig:
         self.rate_hz = _number("rate_hz", self.rate_hz)
         if not 0.0 < self.rate_hz <= 1000.0:
             raise ConfigError(f"rate_hz: must be in (0, 1000], got {self.rate_hz!r}")
-        for name in ("use_sim_time", "search_toward_last_seen", "reset_filter_on_reacquire"):
+        self.target_gate = _number("target_gate", self.target_gate)
+        if not 0.0 < self.target_gate <= 2.0:
+            raise ConfigError(f"target_gate: must be in (0, 2] (normalised image units), got {self.target_gate!r}")
+        for name in ("use_sim_time", "search_toward_last_seen", "reset_filter_on_reacquire",
+                     "keep_target"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"{name}: expected a boolean, got {getattr(self, name)!r}")

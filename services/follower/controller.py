@@ -91,6 +91,7 @@ class FollowerController:
         self._target_size = 0.0
         self._last_seen: float | None = None
         self._last_x: float | None = None
+        self._last_size: float | None = None
 
     def update_config(self, config: FollowerConfig) -> None:
         """Use new parameters from the next call on; the filter and timing state are kept."""
@@ -116,7 +117,29 @@ class FollowerController:
             self._target_size = self._target_size * keep + size * (1.0 - keep)
         self._last_seen = now
         self._last_x = x
+        self._last_size = size
         return True
+
+    def choose(self, balls: list[dict], now: float) -> dict | None:
+        """The ball to follow among one frame's detections (maps with ``x`` and ``z``).
+
+        While tracking, the ball nearest the target's last position (distance in x plus the
+        log-ratio of apparent sizes) if it lies within ``target_gate`` in x and within a factor
+        of 1.5 in size, else None: the target is not in this frame, and another ball is not
+        taken for it. When not tracking, the largest ball (the paper's choice)."""
+        usable = [ball for ball in balls if math.isfinite(ball["x"]) and ball["z"] > 0]
+        if not usable:
+            return None
+        if not self.tracking(now) or self._last_x is None or not self._last_size:
+            return max(usable, key=lambda ball: ball["z"])
+
+        def mismatch(ball: dict) -> float:
+            return abs(ball["x"] - self._last_x) + abs(math.log(ball["z"] / self._last_size))
+
+        candidates = [ball for ball in usable
+                      if abs(ball["x"] - self._last_x) <= self._config.target_gate
+                      and abs(math.log(ball["z"] / self._last_size)) <= math.log(1.5)]
+        return min(candidates, key=mismatch) if candidates else None
 
     def tick(self, now: float) -> Command:
         """The command for time ``now`` (called by the ``rate_hz`` timer)."""

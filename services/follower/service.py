@@ -1,6 +1,8 @@
 """Follower service: ``detected_ball`` -> ``cmd_vel`` (paper section 2.4, ROS2 follow_ball).
 
-Subscribes: ``detected_ball`` (Ball2D); ``clock`` (Clock) when ``use_sim_time`` is set.
+Subscribes: ``detected_balls`` (Ball2DArray) to keep one target among several balls
+(``keep_target``, default), or ``detected_ball`` (Ball2D, the largest) as the original node
+does (``keep_target=false``); ``clock`` (Clock) when ``use_sim_time`` is set.
 Publishes: ``cmd_vel`` (Twist) from a ``rate_hz`` timer (10 Hz) on the configured clock. While
 tracking, the header is the newest detection's (so latency from frame capture to command can
 be measured); while searching, it carries the current time.
@@ -26,10 +28,21 @@ def build(service: ServiceContext):
     service.on_config_change(lambda config: controller.update_config(config))
 
     def on_ball(ball: dict) -> None:
+        if service.config.keep_target:
+            return
         with lock:
             if not controller.on_detection(ball["x"], ball["z"], service.clock.now()):
                 raise MessageError("detection ignored: x or z out of range")
             last_header["header"] = ball["header"]
+
+    def on_balls(frame: dict) -> None:
+        if not service.config.keep_target:
+            return
+        with lock:
+            now = service.clock.now()
+            target = controller.choose(frame["balls"], now)
+            if target is not None and controller.on_detection(target["x"], target["z"], now):
+                last_header["header"] = frame["header"]
 
     def tick() -> None:
         with lock:
@@ -45,7 +58,9 @@ def build(service: ServiceContext):
         output.put({"header": {**header, "frame_id": "base_link"}, "time": now_ns, "mode": command.mode,
                     "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]})
 
+    # Both are subscribed so that keep_target can be switched live.
     service.subscribe(keys.DETECTED_BALL, "Ball2D", on_ball)
+    service.subscribe(keys.DETECTED_BALLS, "Ball2DArray", on_balls)
     service.every(lambda: 1.0 / service.config.rate_hz, tick)
     return None
 

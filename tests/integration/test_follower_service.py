@@ -16,6 +16,8 @@ def start_follower(router, session, log_dir):
     started = []
 
     def start(*overrides):
+        # These tests drive the paper's input, detected_ball; target keeping has its own test.
+        overrides = ("keep_target=false",) + overrides
         arguments = [item for override in overrides for item in ("--set", override)]
         process = start_service("follower", router.endpoint, log_dir, *arguments)
         started.append(process)
@@ -97,3 +99,21 @@ def test_bad_input_config_and_clean_exit(session, start_follower):
     reply = query_config(session, "follower", {"filter_value": 1.5})
     assert not reply["ok"] and reply["error"].startswith("filter_value")
     assert not query_config(session, "follower", {"use_sim_time": True})["ok"]
+
+
+def test_keeps_its_target_among_several_balls(session, start_follower):
+    start_follower("keep_target=true")
+    commands = Collector(session, "cmd_vel", "Twist")
+
+    def frame(seq, *balls):
+        return encode("Ball2DArray", {"header": header(seq * 1000, seq), "balls": [
+            {key: value for key, value in detection(x, z, seq).items() if key != "header"}
+            for x, z in balls]})
+
+    session.put("detected_balls", frame(1, (0.4, 0.05)))
+    commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 1], 5, "chase")
+    # A larger ball appears on the other side; the target is still there: keep turning right.
+    session.put("detected_balls", frame(2, (-0.5, 0.09), (0.38, 0.05)))
+    command = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 2], 5, "kept")[-1]
+    assert command["angular"][2] < 0
+    assert command["angular"][2] == pytest.approx(-0.7 * (0.9 * 0.4 + 0.1 * 0.38))

@@ -255,3 +255,36 @@ def test_update_config_applies_from_the_next_call_and_keeps_state():
     assert follower.tick(1.6).mode == SEARCH  # the shorter timeout applies at once
     follower.update_config(replace_config(follower.config, {"rcv_timeout_secs": 2.0}))
     assert follower.tick(1.6).mode == ARRIVED
+
+
+def _ball(x, z):
+    return {"x": x, "z": z}
+
+
+def test_choose_takes_the_largest_until_tracking_then_keeps_the_target():
+    controller = FollowerController(FollowerConfig())
+    first = controller.choose([_ball(-0.5, 0.05), _ball(0.4, 0.08)], 0.0)
+    assert first == _ball(0.4, 0.08)  # not tracking yet: the largest, as the paper does
+    controller.on_detection(first["x"], first["z"], 0.0)
+    # A bigger ball appears elsewhere: the target (moved a little) is kept.
+    kept = controller.choose([_ball(-0.3, 0.2), _ball(0.35, 0.085)], 0.1)
+    assert kept == _ball(0.35, 0.085)
+    # The target is gone from the frame: no ball is taken in its place.
+    assert controller.choose([_ball(-0.3, 0.2)], 0.2) is None
+    # After the timeout the target is lost: the largest again.
+    assert controller.choose([_ball(-0.3, 0.2)], 5.0) == _ball(-0.3, 0.2)
+
+
+def test_choose_rejects_balls_of_very_different_size_near_the_target():
+    controller = FollowerController(FollowerConfig())
+    controller.on_detection(0.0, 0.05, 0.0)
+    assert controller.choose([_ball(0.05, 0.2)], 0.1) is None       # 4x larger: another ball
+    assert controller.choose([_ball(0.05, 0.06)], 0.1) == _ball(0.05, 0.06)
+    assert controller.choose([], 0.1) is None
+
+
+def test_target_gate_is_validated():
+    with pytest.raises(ConfigError, match="target_gate"):
+        FollowerConfig(target_gate=0.0)
+    with pytest.raises(ConfigError, match="keep_target"):
+        FollowerConfig(keep_target="yes")
