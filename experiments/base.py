@@ -1,0 +1,304 @@
+"""What every experiment shares: options, results with stable names, goals, report, plots.
+
+An experiment module has ``NAME``, ``TITLE`` and ``run(options) -> ExperimentResult``. The
+result holds
+
+* ``figures``: every number under a stable name ``<experiment>/<condition>/<metric>`` (slashes,
+  so that numbers such as ``diffuse_0.05`` keep their dots), the names tests and people rely on;
+* ``goals``: each goal with its target, what was achieved and PASS/MISS (a miss is reported,
+  never dropped);
+* ``tables``: markdown tables for the report (the paper's figure beside ours where it has one);
+* ``plots``: PNG files written into the output folder;
+* ``mode``: how it ran: ``in-process`` (simulator, detector and locator cores called directly),
+  ``zenoh`` (the real service processes), ``offline`` (image files) or ``skipped``.
+
+:func:`write_outputs` merges results into ``DIR/results.json`` (one entry per experiment, a
+rerun replaces its entry) and rewrites ``DIR/report.md`` from the merged file.
+"""
+
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+RESULTS_FILE = "results.json"
+REPORT_FILE = "report.md"
+MODES = ("in-process", "zenoh", "offline", "skipped")
+
+
+@dataclass
+class Options:
+    """Command-line options shared by all experiments."""
+
+    out: Path
+    quick: bool = False
+    # Overrides the frame (or run) budget per condition of every experiment; None = default.
+    frames: int | None = None
+    seed: int = 0
+    photos: Path | None = None
+    # Tracking transport: "auto" (Zenoh services in lockstep if the simulator service works,
+    # else in-process), "in-process" or "zenoh".
+    transport: str = "auto"
+    progress: bool = True
+    # --detector / --follower KEY=VALUE: parameters changed from the product's defaults (to try
+    # a proposed fix); every experiment uses them and the report lists them.
+    detector_overrides: list[str] = field(default_factory=list)
+    follower_overrides: list[str] = field(default_factory=list)
+
+    def detector_config(self):
+        """The detector parameters every experiment uses: defaults plus ``--detector``."""
+        from common.config import load_config
+        from services.detector.config import DetectorConfig
+
+        return load_config(DetectorConfig, None, self.detector_overrides)
+
+    def follower_config(self, **experiment_settings):
+        """Follower parameters: defaults, then the experiment's own, then ``--follower``."""
+        from common.config import load_config, parse_overrides
+        from services.follower.config import FollowerConfig
+
+        overrides = [f"{key}={value}" for key, value in experiment_settings.items()]
+        command_line = parse_overrides(self.follower_overrides)
+        overrides += [f"{key}={value}" for key, value in command_line.items()]
+        return load_config(FollowerConfig, None, overrides)
+
+    def budget(self, quick: int, full: int) -> int:
+        """Frames (or runs) per condition: ``--frames`` if given, else the quick or full count."""
+        if self.frames is not None:
+            return max(1, self.frames)
+        return quick if self.quick else full
+
+
+@dataclass
+class Goal:
+    name: str
+    description: str
+    target: str
+    achieved: str
+    passed: bool
+
+    @property
+    def status(self) -> str:
+        return "PASS" if self.passed else "MISS"
+
+
+@dataclass
+class ExperimentResult:
+    name: str
+    title: str
+    mode: str = "in-process"
+    mode_note: str = ""
+    figures: dict[str, Any] = field(default_factory=dict)
+    goals: list[Goal] = field(default_factory=list)
+    tables: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    plots: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    quick: bool = False
+    settings: dict[str, Any] = field(default_factory=dict)
+    # Rows [what, the paper's figure, ours] for the report's "paper vs balltrack" table.
+    paper: list[list[str]] = field(default_factory=list)
+
+    def compare(self, what: str, paper: str, ours: str) -> None:
+        self.paper.append([what, paper, ours])
+
+    def figure(self, name: str, value: Any) -> Any:
+        """Record one figure as ``<experiment>/<name>``; floats are rounded for readability."""
+        if isinstance(value, float):
+            value = None if not math.isfinite(value) else round(value, 6)
+        self.figures[f"{self.name}/{name}"] = value
+        return value
+
+    def goal(self, name: str, description: str, target: str, achieved: str, passed: bool) -> Goal:
+        goal = Goal(f"{self.name}/{name}", description, target, achieved, bool(passed))
+        self.goals.append(goal)
+        return goal
+
+    def table(self, headers: list[str], rows: list[list[Any]], caption: str = "") -> None:
+        self.tables.append(markdown_table(headers, rows, caption))
+
+    def save_plot(self, figure, out: Path, filename: str) -> None:
+        """Save a matplotlib figure as ``out/filename`` (PNG) and list it in the report."""
+        out.mkdir(parents=True, exist_ok=True)
+        figure.tight_layout()
+        figure.savefig(out / filename, dpi=100)
+        plt.close(figure)
+        if filename not in self.plots:
+            self.plots.append(filename)
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["goals"] = [{**asdict(goal), "name": goal.name, "status": goal.status}
+                         for goal in self.goals]
+        return data
+
+
+def progress(iterable: Iterable | None = None, total: int | None = None, desc: str = "",
+             options: Options | None = None, unit: str = "frame"):
+    """A tqdm progress bar on stderr (off when ``options.progress`` is False)."""
+    disable = options is not None and not options.progress
+    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, disable=disable,
+                leave=False, dynamic_ncols=True, mininterval=0.5)
+
+
+def markdown_table(headers: list[str], rows: list[list[Any]], caption: str = "") -> str:
+    def cell(value: Any) -> str:
+        if value is None:
+            return "-"
+        if isinstance(value, float):
+            return f"{value:.3g}"
+        return str(value).replace("|", "\\|")
+
+    lines = []
+    if caption:
+        lines += [caption, ""]
+    lines.append("| " + " | ".join(headers) + " |")
+    lines.append("| " + " | ".join("---" for _ in headers) + " |")
+    for row in rows:
+        lines.append("| " + " | ".join(cell(value) for value in row) + " |")
+    return "\n".join(lines)
+
+
+def percent(value: float | None, digits: int = 1) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{100 * value:.{digits}f} %"
+
+
+def quantile(values: list[float], q: float) -> float | None:
+    """The q-quantile (linear interpolation) of ``values``, or None when there are none."""
+    finite = sorted(value for value in values if value is not None and math.isfinite(value))
+    if not finite:
+        return None
+    position = q * (len(finite) - 1)
+    low = math.floor(position)
+    high = min(low + 1, len(finite) - 1)
+    return finite[low] + (finite[high] - finite[low]) * (position - low)
+
+
+def ratio(numerator: float, denominator: float) -> float | None:
+    return numerator / denominator if denominator else None
+
+
+class Stopwatch:
+    def __init__(self):
+        self.started = time.perf_counter()
+
+    @property
+    def seconds(self) -> float:
+        return time.perf_counter() - self.started
+
+
+# ---------------------------------------------------------------------------------------------
+# Output files
+
+
+def load_results(out: Path) -> dict[str, Any]:
+    path = Path(out) / RESULTS_FILE
+    if not path.exists():
+        return {"experiments": {}}
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        return {"experiments": {}}
+    if not isinstance(data, dict) or not isinstance(data.get("experiments"), dict):
+        return {"experiments": {}}
+    return data
+
+
+def write_outputs(out: Path, results: list[ExperimentResult], order: list[str]) -> dict[str, Any]:
+    """Merge ``results`` into ``out/results.json`` and rewrite ``out/report.md``; returns the
+    merged document. ``order`` is the experiments' report order."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    merged = load_results(out)
+    for result in results:
+        merged["experiments"][result.name] = result.to_json()
+    ranked = sorted(merged["experiments"],
+                    key=lambda name: order.index(name) if name in order else len(order))
+    merged["experiments"] = {name: merged["experiments"][name] for name in ranked}
+    figures: dict[str, Any] = {}
+    goals: list[dict] = []
+    for entry in merged["experiments"].values():
+        figures.update(entry.get("figures", {}))
+        goals.extend(entry.get("goals", []))
+    merged["figures"] = figures
+    merged["goals"] = goals
+    merged["summary"] = {
+        "goals": len(goals),
+        "passed": sum(1 for goal in goals if goal["passed"]),
+        "missed": [goal["name"] for goal in goals if not goal["passed"]],
+    }
+    (out / RESULTS_FILE).write_text(json.dumps(merged, indent=1) + "\n")
+    (out / REPORT_FILE).write_text(render_report(merged))
+    return merged
+
+
+def render_report(merged: dict[str, Any]) -> str:
+    lines = ["# balltrack experiments", ""]
+    experiments = merged["experiments"]
+    lines += ["| experiment | ran | quick | time (s) | goals |", "| --- | --- | --- | --- | --- |"]
+    for name, entry in experiments.items():
+        goals = entry.get("goals", [])
+        passed = sum(1 for goal in goals if goal["passed"])
+        goal_text = f"{passed}/{len(goals)} PASS" if goals else "-"
+        lines.append(f"| [{name}](#{name}) | {entry['mode']} | {'yes' if entry.get('quick') else 'no'} "
+                     f"| {entry.get('seconds', 0):.0f} | {goal_text} |")
+    lines.append("")
+    if any(entry.get("quick") for entry in experiments.values()):
+        lines += ["Quick runs use small budgets (a few frames per condition, two runs per kind of "
+                  "start): a rate from a handful of samples, PASS or MISS, is weak evidence; the "
+                  "full run (without --quick) measures the same with more samples.", ""]
+    comparisons = [(name, row) for name, entry in experiments.items()
+                   for row in entry.get("paper", [])]
+    if comparisons:
+        lines += ["## The paper's figures beside ours", "",
+                  "| experiment | what | paper | balltrack |", "| --- | --- | --- | --- |"]
+        for name, (what, paper, ours) in comparisons:
+            lines.append(f"| {name} | {what} | {paper} | {ours} |")
+        lines.append("")
+    all_goals = [goal for entry in experiments.values() for goal in entry.get("goals", [])]
+    if all_goals:
+        lines += ["## Goals", "", "| goal | target | achieved | status |", "| --- | --- | --- | --- |"]
+        for goal in all_goals:
+            status = "PASS" if goal["passed"] else "**MISS**"
+            lines.append(f"| {goal['name']}: {goal['description']} | {goal['target']} "
+                         f"| {goal['achieved']} | {status} |")
+        lines.append("")
+    for name, entry in experiments.items():
+        lines += [f'<a id="{name}"></a>', f"## {name}: {entry['title']}", ""]
+        how = {"in-process": "in-process (simulator, detector and locator cores called directly, "
+                             "no Zenoh)",
+               "zenoh": "over Zenoh (router and service processes)",
+               "offline": "offline (detector core on image files)",
+               "skipped": "skipped"}.get(entry["mode"], entry["mode"])
+        lines.append(f"**Ran:** {how}." + (f" {entry['mode_note']}" if entry.get("mode_note") else ""))
+        lines.append("")
+        if entry.get("settings"):
+            settings = ", ".join(f"{key} = {value}" for key, value in entry["settings"].items())
+            lines += [f"**Settings:** {settings}", ""]
+        for note in entry.get("notes", []):
+            lines += [note, ""]
+        for table in entry.get("tables", []):
+            lines += [table, ""]
+        goals = entry.get("goals", [])
+        if goals:
+            lines += ["| goal | target | achieved | status |", "| --- | --- | --- | --- |"]
+            for goal in goals:
+                status = "PASS" if goal["passed"] else "**MISS**"
+                lines.append(f"| {goal['description']} | {goal['target']} | {goal['achieved']} "
+                             f"| {status} |")
+            lines.append("")
+        for plot in entry.get("plots", []):
+            lines += [f"![{plot}]({plot})", ""]
+    return "\n".join(lines)

@@ -1,0 +1,307 @@
+"""Closed-loop runs over Zenoh: the real service processes, the simulator in lockstep pacing.
+
+:class:`ZenohLoop` starts a router on a free local port and the simulator (``pacing =
+lockstep``, so that the results do not depend on the machine's load), detector, locator and
+follower (``use_sim_time``) processes, then runs one scenario after another:
+
+1. ``reset`` to an empty scenario (no ball) for 1.2 simulated seconds, so that the follower's
+   detection timeout passes and the next run starts from a lost target, as a fresh start would;
+2. ``reset`` to the run's scenario (a TOML file written for it);
+3. judge every ``sim/ground_truth`` frame until the run is over, recording ``cmd_vel`` (and
+   ``detected_ball_3d`` for a recorded run).
+
+Process logs go to a temporary folder; a failure message quotes the tail of the logs.
+"""
+
+import math
+import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from common import keys
+from experiments.rig import scenario_data, write_scenario
+from services.detector.config import DetectorConfig
+from services.follower.config import FollowerConfig
+
+REPO = Path(__file__).resolve().parents[1]
+STARTUP_TIMEOUT = 90.0
+STALL_TIMEOUT = 20.0
+SETTLE_SECONDS = 1.2
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _setting(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list):
+        return ",".join(str(item) for item in value)
+    return str(value)
+
+
+def config_arguments(config, skip: tuple[str, ...] = ()) -> list[str]:
+    """``--set key=value`` for every field of ``config`` that differs from the defaults."""
+    defaults = type(config)()
+    arguments = []
+    for item in fields(config):
+        value = getattr(config, item.name)
+        if item.name not in skip and value != getattr(defaults, item.name):
+            arguments += ["--set", f"{item.name}={_setting(value)}"]
+    return arguments
+
+
+class _Process:
+    def __init__(self, name: str, arguments: list[str], log_dir: Path):
+        self.name = name
+        self.log_path = log_dir / f"{name}.log"
+        self._log = open(self.log_path, "wb")
+        environment = dict(os.environ)
+        environment.setdefault("MUJOCO_GL", "egl")
+        environment["PYTHONPATH"] = str(REPO) + os.pathsep + environment.get("PYTHONPATH", "")
+        environment["PYTHONUNBUFFERED"] = "1"
+        self.popen = subprocess.Popen([sys.executable, *arguments], stdout=self._log,
+                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                      env=environment, cwd=REPO)
+
+    def tail(self, lines: int = 8) -> str:
+        text = self.log_path.read_text(errors="replace").strip().splitlines()
+        return " | ".join(text[-lines:])
+
+    def running(self) -> bool:
+        return self.popen.poll() is None
+
+    def stop(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(15)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait()
+        self._log.close()
+
+
+class ZenohLoop:
+    """Router + simulator (lockstep) + detector + locator + follower, driven run by run."""
+
+    def __init__(self, out: Path, follower: FollowerConfig, detector: DetectorConfig,
+                 simulator_settings: dict[str, Any] | None = None):
+        self.follower = follower
+        self.detector = detector
+        self.simulator_settings = simulator_settings or {}
+        self._temporary = tempfile.TemporaryDirectory(prefix="balltrack-tracking-")
+        self.folder = Path(self._temporary.name)
+        self.processes: list[_Process] = []
+        self.session = None
+        self._subscribers = []
+        self._truths: queue.Queue = queue.Queue()
+        self._lock = threading.Lock()
+        self._commands: list[dict] = []
+        self._estimates: dict[int, tuple[float, float, float]] = {}
+        self._record = False
+        self._run_count = 0
+
+    # -- start and stop -------------------------------------------------------------------------
+
+    def __enter__(self) -> "ZenohLoop":
+        try:
+            self._start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def _start(self) -> None:
+        from common.session import open_session
+
+        port = _free_port()
+        endpoint = f"tcp/127.0.0.1:{port}"
+        router = _Process("router", ["-m", "common.cli", "router", "--listen", endpoint], self.folder)
+        self.processes.append(router)
+        self._wait_for_log(router, "listening on", 30)
+        self.blank = write_scenario(scenario_data(name="blank", description="no ball"),
+                                    self.folder / "blank.toml")
+        simulator_sets = {"scenario": str(self.blank), "pacing": "lockstep",
+                          **self.simulator_settings}
+        sim_arguments = [item for key, value in simulator_sets.items()
+                         for item in ("--set", f"{key}={_setting(value)}")]
+        follower_arguments = config_arguments(self.follower, skip=("use_sim_time",))
+        follower_arguments += ["--set", "use_sim_time=true"]
+        for name, extra in (("simulator", sim_arguments),
+                            ("detector", config_arguments(self.detector)),
+                            ("locator", []), ("follower", follower_arguments)):
+            self.processes.append(_Process(name, ["-m", f"services.{name}", "--connect", endpoint,
+                                                  *extra], self.folder))
+        self.session = open_session([endpoint], open_timeout=10)
+        self._wait_alive(("simulator", "detector", "locator", "follower"))
+
+        def on_truth(sample) -> None:
+            self._truths.put(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
+
+        def on_command(sample) -> None:
+            with self._lock:
+                self._commands.append(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
+
+        def on_estimate(sample) -> None:
+            if not self._record:
+                return
+            message = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+            with self._lock:
+                self._estimates[message["header"]["stamp"]] = (message["x"], message["y"], message["z"])
+
+        self._subscribers = [self.session.declare_subscriber(keys.GROUND_TRUTH, on_truth),
+                             self.session.declare_subscriber(keys.CMD_VEL, on_command),
+                             self.session.declare_subscriber(keys.DETECTED_BALL_3D, on_estimate)]
+
+    def _wait_for_log(self, process: _Process, text: str, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in process.log_path.read_text(errors="replace"):
+                return
+            if not process.running():
+                raise RuntimeError(f"{process.name} exited: {process.tail()}")
+            time.sleep(0.1)
+        raise RuntimeError(f"{process.name}: no {text!r} in {timeout:g} s: {process.tail()}")
+
+    def _wait_alive(self, names: tuple[str, ...]) -> None:
+        deadline = time.monotonic() + STARTUP_TIMEOUT
+        alive: set[str] = set()
+        while time.monotonic() < deadline:
+            alive = set()
+            for reply in self.session.liveliness().get("alive/*", timeout=2.0):
+                if reply.ok is not None:
+                    alive.add(str(reply.ok.key_expr).split("/", 1)[1])
+            if all(name in alive for name in names):
+                return
+            for process in self.processes:
+                if not process.running():
+                    raise RuntimeError(f"{process.name} exited: {process.tail()}")
+            time.sleep(0.5)
+        missing = [name for name in names if name not in alive]
+        raise RuntimeError(f"services not alive after {STARTUP_TIMEOUT:g} s: {', '.join(missing)}")
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            try:
+                subscriber.undeclare()
+            except Exception:  # noqa: BLE001  (closing anyway)
+                pass
+        self._subscribers = []
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        # Services first, the router last.
+        for process in reversed(self.processes):
+            process.stop()
+        self.processes = []
+        self._temporary.cleanup()
+
+    # -- runs -----------------------------------------------------------------------------------
+
+    def _command(self, request: dict) -> None:
+        from services.simulator.control import send_command
+
+        reply = send_command(self.session, request, timeout=10.0)
+        if not reply.get("ok"):
+            raise RuntimeError(f"sim/control {request.get('op')}: {reply.get('error')}")
+
+    def _next_truth(self) -> dict:
+        try:
+            return self._truths.get(timeout=STALL_TIMEOUT)
+        except queue.Empty:
+            dead = [process.name for process in self.processes if not process.running()]
+            raise RuntimeError(f"no ground truth for {STALL_TIMEOUT:g} s (exited: "
+                               f"{', '.join(dead) or 'none'}); simulator log: "
+                               f"{self.processes[1].tail()}") from None
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                self._truths.get_nowait()
+            except queue.Empty:
+                return
+
+    def run(self, spec, record: bool = False):
+        """One run of ``spec`` (a tracking.RunSpec); returns a tracking.Outcome."""
+        from experiments.tracking import Judge, Outcome, _append_trace, _new_trace
+
+        self._run_count += 1
+        # 1. No ball until the follower has timed out.
+        self._command({"op": "reset", "scenario": str(self.blank)})
+        self._drain()
+        start = None
+        while True:
+            truth = self._next_truth()
+            if truth["balls"]:
+                continue  # a frame from before the reset
+            stamp = truth["header"]["stamp"] / 1e9
+            start = stamp if start is None else start
+            if stamp - start >= SETTLE_SECONDS:
+                break
+        # 2. The run's scenario.
+        path = write_scenario(spec.scenario, self.folder / f"run_{self._run_count}.toml")
+        with self._lock:
+            self._commands = []
+            self._estimates = {}
+        self._record = record
+        self._command({"op": "reset", "scenario": str(path)})
+        outcome = Outcome(spec.category, spec.index)
+        judge = Judge(outcome)
+        trace = _new_trace() if record else None
+        truths = []
+        origin = None
+        while True:
+            truth = self._next_truth()
+            if not truth["balls"]:
+                continue  # still the blank scenario
+            stamp = truth["header"]["stamp"]
+            origin = stamp if origin is None else origin
+            elapsed = (stamp - origin) / 1e9
+            robot = (truth["robot"]["x"], truth["robot"]["y"], truth["robot"]["yaw"])
+            ball = truth["balls"][0]
+            truths.append((stamp, elapsed, robot, ball))
+            if judge.update(elapsed, robot, ball["position"]):
+                break
+        self._record = False
+        with self._lock:
+            commands = [command for command in self._commands
+                        if command.get("time", command["header"]["stamp"]) >= origin]
+            estimates = dict(self._estimates)
+        for command in commands:
+            mode = command.get("mode", "")
+            outcome.modes[mode] = outcome.modes.get(mode, 0) + 1
+            outcome.last_mode = mode
+        if trace is not None:
+            by_time = sorted(commands, key=lambda c: c.get("time", c["header"]["stamp"]))
+            command_index = 0
+            for stamp, elapsed, robot, ball in truths:
+                command = None
+                while (command_index < len(by_time)
+                       and by_time[command_index].get("time", 0) <= stamp):
+                    item = by_time[command_index]
+                    command = (item["linear"][0], item["angular"][2], item.get("mode", ""))
+                    command_index += 1
+                _append_trace(trace, elapsed, robot, ball["position"], ball["in_camera"],
+                              estimates.get(stamp), command)
+        outcome.trace = trace
+        if not math.isfinite(outcome.final_distance):
+            raise RuntimeError("run ended without ground truth")
+        return outcome

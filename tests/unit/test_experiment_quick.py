@@ -1,0 +1,73 @@
+"""One experiment end to end through ``experiments.cli.main``: files, stable names, plausible numbers.
+
+The illumination experiment runs in-process (simulator, detector and locator cores) with a
+tiny frame budget, so this takes a few seconds.
+"""
+
+import json
+
+import pytest
+
+from experiments import cli
+
+
+def test_illumination_writes_results_report_and_plots(tmp_path):
+    status = cli.main(["illumination", "--frames", "2", "--out", str(tmp_path), "--no-progress"])
+    assert status == 0
+
+    results = json.loads((tmp_path / "results.json").read_text())
+    entry = results["experiments"]["illumination"]
+    assert entry["mode"] == "in-process"
+    figures = results["figures"]
+    for setup in ("ambient_0.4", "ambient_0"):
+        for level in ("0.8", "0.5", "0.1", "0.05", "0.02", "0.01"):
+            for metric in ("detection_rate", "frames", "false_detections",
+                           "exact_median_error_rel", "faithful_median_error_rel"):
+                assert f"illumination/{setup}/diffuse_{level}/{metric}" in figures
+            assert figures[f"illumination/{setup}/diffuse_{level}/frames"] == 2
+    # A tennis ball 1 m ahead under the brightest light with Gazebo's ambient: always found,
+    # located within a few percent by the exact model; the faithful model is ~5-10 % off there.
+    assert figures["illumination/ambient_0.4/diffuse_0.8/detection_rate"] == 1.0
+    assert figures["illumination/ambient_0.4/diffuse_0.8/false_detections"] == 0
+    assert 0.0 <= figures["illumination/ambient_0.4/diffuse_0.8/exact_median_error_rel"] < 0.05
+    assert 0.01 < figures["illumination/ambient_0.4/diffuse_0.8/faithful_median_error_rel"] < 0.3
+    for name, value in figures.items():
+        if name.endswith("/detection_rate"):
+            assert 0.0 <= value <= 1.0, name
+
+    goals = {goal["name"]: goal for goal in results["goals"]}
+    assert set(goals) == {"illumination/ambient_0.4/paper_levels", "illumination/ambient_0.4/lowest_level",
+                          "illumination/ambient_0/paper_levels", "illumination/ambient_0/lowest_level"}
+    for goal in goals.values():
+        assert goal["status"] == ("PASS" if goal["passed"] else "MISS")
+
+    report = (tmp_path / "report.md").read_text()
+    assert "in-process" in report and "Table 1" in report and "~500 lx" in report
+    for plot in entry["plots"]:
+        assert (tmp_path / plot).stat().st_size > 1000
+        assert f"]({plot})" in report
+
+
+def test_rerun_of_another_experiment_merges(tmp_path):
+    (tmp_path / "results.json").write_text(json.dumps({"experiments": {"range": {
+        "title": "t", "mode": "in-process", "figures": {"range/x": 1}, "goals": []}}}))
+    assert cli.main(["illumination", "--frames", "1", "--out", str(tmp_path), "--no-progress"]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert list(results["experiments"]) == ["illumination", "range"]
+    assert results["figures"]["range/x"] == 1
+
+
+@pytest.mark.parametrize("arguments", [
+    ["nonsense", "--out", "OUT"],
+    ["illumination"],                                   # no --out
+    ["illumination", "--out", "OUT", "--frames", "0"],
+    ["real_photos", "--out", "OUT"],                    # no --photos
+    ["illumination", "--out", "OUT", "--detector", "no_such_parameter=1"],
+])
+def test_bad_arguments_exit_2_with_one_line(arguments, tmp_path, capsys):
+    arguments = [str(tmp_path / "out") if item == "OUT" else item for item in arguments]
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(arguments)
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("balltrack experiment:") and "\n" not in error
