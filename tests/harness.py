@@ -245,3 +245,21 @@ def draw_ball(image, u: float, v: float, radius: float, colour=TENNIS_BGR):
     ball = np.array(colour, np.float32)[None, None, :] * shade
     blended = image.astype(np.float32) * (1 - coverage) + ball * coverage
     return cv2.GaussianBlur(np.clip(blended, 0, 255).astype(np.uint8), (3, 3), 0)
+
+
+def fully_in_view(in_camera, radius: float, width: int = 640, height: int = 480,
+                  hfov: float = 1.089, margin_px: float = 2.0) -> bool:
+    """Whether a ball (centre in the camera optical frame) is wholly inside the image: a ball
+    cut by the border shows less than its size, so its distance cannot be judged from it."""
+    import math
+
+    x, y, z = in_camera
+    if z <= radius:
+        return False
+    focal = (width / 2) / math.tan(hfov / 2)
+    u, v = width / 2 + focal * x / z, height / 2 + focal * y / z
+    reach = focal * math.tan(math.asin(min(1.0, radius / math.dist(in_camera, (0, 0, 0))))) + margin_px
+    # Off axis the silhouette stretches outward by about 1/cos^2 of the angle: widen the reach.
+    stretch = 1.0 + (x * x + y * y) / (z * z)
+    return (reach * stretch <= u <= width - reach * stretch
+            and reach * stretch <= v <= height - reach * stretch)

@@ -19,7 +19,7 @@ import time
 
 import pytest
 
-from tests.harness import REPO, Process
+from tests.harness import REPO, Process, fully_in_view
 from tests.netns import NetworkNamespaces, netns_available, remove_stale
 
 pytestmark = pytest.mark.netns
@@ -107,10 +107,11 @@ def at_least(count: int, collect):
 
 
 def true_positions(truths: Process) -> dict[int, dict]:
-    """Per frame seq: where the one visible ball was ({in_camera, distance})."""
+    """Per frame seq: where the one wholly visible ball was ({in_camera, distance})."""
     found = {}
     for truth in json_lines(truths):
-        visible = [ball for ball in truth["balls"] if ball["visible"]]
+        visible = [ball for ball in truth["balls"]
+                   if ball["visible"] and fully_in_view(ball["in_camera"], ball["radius"])]
         if len(visible) == 1:
             in_camera = visible[0]["in_camera"]
             found[truth["header"]["seq"]] = {"in_camera": in_camera,
