@@ -57,8 +57,8 @@ MEANINGS = {
         "param2": "Hough: accumulator threshold (lower finds more, and more false, circles)",
         "min_radius": "smallest ball radius (px)",
         "max_radius": "largest ball radius (px); 0 = half the frame's shorter side",
-        "small_radius": "balls smaller than this (px) must be a clean, isolated round blob; a ball cut "
-                        "by the frame edge must show at least this much rim",
+        "small_radius": "balls smaller than this (px) are kept only when their outline is found "
+                        "on the frame; a ball cut by the frame edge must show at least this much rim",
         "blur_kernel": "Gaussian blur kernel (odd px); 1 = no blur",
         "clahe_clip_limit": "CLAHE contrast limit on V; 0 = no CLAHE",
         "clahe_tile_grid": "CLAHE tiles per side",

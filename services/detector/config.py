@@ -49,12 +49,18 @@ class DetectorConfig:
     # Hough circle transform (cv2.HOUGH_GRADIENT on the smoothed colour mask, inside each blob
     # that is not already one clean ball), radii in pixels of the input frame. param2 is the
     # accumulator threshold. max_radius = 0: no limit but half the frame's shorter side.
+    # min_radius bounds the reported radius too (the outline's): a tennis ball 5 m away from
+    # the 640 px, 1.089 rad camera is ~3.5 px.
     dp: float = 1.0
     min_dist: float = 8.0
     param1: float = 100.0
     param2: float = 20.0
-    min_radius: int = 5
+    min_radius: int = 3
     max_radius: int = 0
+    # Balls smaller than this (pixels) must be whole and have their outline found on the frame,
+    # and a ball cut by the frame edge must show at least as much rim as a whole ball of this
+    # radius has: a few pixels of yellow-green prove little.
+    small_radius: int = 5
 
     # Preprocessing. blur_kernel 1 = no blur; clahe_clip_limit 0 = no CLAHE.
     blur_kernel: int = 5
@@ -80,7 +86,7 @@ class DetectorConfig:
     min_fill_ratio: float = 0.55
     min_edge_support: float = 0.4
     max_outside_ratio: float = 0.3
-    min_visible_fraction: float = 0.35
+    min_visible_fraction: float = 0.25
     min_score: float = 0.5
     # Colourfulness of a candidate: the mean chroma (max - min channel) of its mask pixels over
     # the frame's reference level (see gain_target). Fluorescent felt is vivid; leaves in shade,
@@ -116,6 +122,8 @@ class DetectorConfig:
             _check_positive(name, getattr(self, name))
         if self.min_radius < 1:
             raise ConfigError(f"min_radius: must be >= 1, got {self.min_radius}")
+        if self.small_radius < 1:
+            raise ConfigError(f"small_radius: must be >= 1, got {self.small_radius}")
         if self.max_radius < 0:
             raise ConfigError(f"max_radius: must be >= 0 (0 = no limit), got {self.max_radius}")
         if self.max_radius and self.max_radius <= self.min_radius:

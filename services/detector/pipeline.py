@@ -24,6 +24,18 @@ The paper's pipeline, with the checks that make it hold up on real photos:
    disc must have the target's hue too.
 7. Accepted balls are erased from the mask and their neighbours judged again (a ball touching
    a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
+8. Each accepted ball's circle is replaced by its outline located on the frame itself
+   (``_silhouette``): along rays from the centre, the colour edge at its 50 % crossing, then a
+   robust circle fit. The colour mask's edge lies where blur has spread the colour (radii
+   0.5-1 px too large whatever the size, the more blurred the frame the more), and a strongly
+   shaded side drags its centre towards the lit side; the 50 % crossing of the edge does not
+   move with blur, and edges of shading are told from the outline (see ``_shading``). Balls
+   smaller than ``small_radius`` are kept only when their outline is found; the others keep
+   the mask's circle when it is not (clutter all round, too little of the rim in view).
+9. Under a light with no ambient, a ball's unlit side is black: its colour is a lit cap, which
+   the checks may reject. A few rejected candidates with something dark around them get a
+   second look: if the frame shows an outline around the cap, with all the colour inside and
+   a dark side within, the outline is the ball.
 
 No zenoh here: arrays in, dataclasses out.
 
@@ -69,6 +81,44 @@ EDGE_STEPS = 25
 EXPLAINED = 128
 # Rounds of accepting balls and looking again around them.
 MAX_ROUNDS = 3
+# Silhouette refinement of accepted balls (radial edge profiles of the frame itself):
+# sample spacing along a ray (px); an edge is a local maximum of the colour gradient along the
+# ray of at least EDGE_SIGNIFICANT of that ray's strongest; rays whose strongest gradient is
+# below EDGE_FLOOR of the median ray's see no edge (a dark side against a dark background).
+RAY_STEP = 0.5
+EDGE_SIGNIFICANT = 0.45
+EDGE_FLOOR = 0.3
+# Half width (px; at most 30 % of the radius) of the profile around an edge whose levels set
+# its 50 % crossing.
+EDGE_HALF_WIDTH = 1.5
+# Edges are looked for from this far (px, plus 15 % of the radius, at most 40 % of it) inside
+# the current circle.
+EDGE_MARGIN = 2.5
+# Shading, not an outline: past the edge the colour is the ball's colour times less than
+# SHADING_SHARE, off that axis by at most SHADING_TOLERANCE of its brightness, or it is
+# nearly black (below DARK_SHARE of the frame's reference level).
+SHADING_SHARE = 0.9
+SHADING_TOLERANCE = 0.12
+DARK_SHARE = 0.03
+# A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
+# with no ambient: its dark side is found by the silhouette search, or it is dropped).
+LIT_CAP_SHARE = 0.6
+# Rejected candidates looked at again for a dark side (largest first, per frame). A dark side
+# is at least DARK_SIDE_SHARE of the outline's disc outside the colour mask, on average at most
+# DARK_SIDE_LEVEL times as bright as the lit (colour) part.
+DARK_SIDE_ATTEMPTS = 3
+DARK_SIDE_SHARE = 0.15
+DARK_SIDE_LEVEL = 0.5
+# Most wide rounds of the silhouette search (each from the last circle found, until it stops
+# growing) before the narrow one.
+SILHOUETTE_WIDE_ROUNDS = 3
+# Rays of the wide and the narrow rounds (fewer for small balls: one per pixel of rim, >= 24).
+WIDE_RAYS = 36
+# Largest blur (Gaussian sigma, px) corrected for.
+BLUR_LIMIT = 2.0
+NARROW_RAYS = 90
+# The search reaches this many times the colour mask's radius from its centre.
+SILHOUETTE_REACH = 2.6
 
 
 @dataclass(frozen=True)
@@ -95,6 +145,8 @@ class _Candidate:
     y: float
     radius: float
     score: float = 0.0
+    # A small candidate is kept only if its outline is found on the frame (see _outlines).
+    needs_outline: bool = False
 
 
 def _ellipse(size: int) -> np.ndarray | None:
@@ -220,6 +272,309 @@ def _circle_overlap(first: _Candidate, second: _Candidate) -> float:
     return (part1 + part2 - part3) / (math.pi * small * small)
 
 
+def _ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
+                  directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Colours (rays x radii x 3, float32) sampled bilinearly along rays from (x, y) in
+    ``patch``, and per ray the distances along it at which it enters and leaves the patch."""
+    map_x = (x + directions[0][:, None] * radii[None, :]).astype(np.float32)
+    map_y = (y + directions[1][:, None] * radii[None, :]).astype(np.float32)
+    height, width = patch.shape[:2]
+    values = cv2.remap(patch, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    enter = np.full(directions.shape[1], -np.inf)
+    leave = np.full(directions.shape[1], np.inf)
+    for position, direction, size in ((x, directions[0], width), (y, directions[1], height)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            low, high = (0.0 - position) / direction, (size - 1.0 - position) / direction
+        flat = np.abs(direction) < 1e-9
+        low = np.where(flat, np.where(0.0 <= position <= size - 1.0, -np.inf, np.inf), low)
+        high = np.where(flat, np.where(0.0 <= position <= size - 1.0, np.inf, -np.inf), high)
+        enter = np.maximum(enter, np.minimum(low, high))
+        leave = np.minimum(leave, np.maximum(low, high))
+    return values.reshape(map_x.shape + (-1,)), enter, leave
+
+
+def _edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Significant colour-gradient peaks along each ray (rays x samples, only where
+    ``allowed``), whether each ray sees an edge at all, and the gradient (per sample step)."""
+    rays, count = profiles.shape[:2]
+    difference = profiles[:, 2:] - profiles[:, :-2]
+    gradient = np.zeros((rays, count), np.float32)
+    gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
+    gradient[~allowed] = 0.0
+    strongest = gradient.max(axis=1)
+    floor = EDGE_FLOOR * float(np.median(strongest)) if rays else 0.0
+    peak = np.zeros((rays, count), bool)
+    middle = gradient[:, 1:-1]
+    peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
+                     & (middle >= EDGE_SIGNIFICANT * strongest[:, None]))
+    return peak, peak.any(axis=1) & (strongest > max(floor, 1e-3)), gradient
+
+
+def _shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: np.ndarray,
+             half: int, quantum: float, dark: float) -> np.ndarray:
+    """Whether edges (at ``index`` along ``rays``) are shading rather than an outline: going
+    outwards the colour darkens into a darker version of the ball's ``colour`` (within
+    ``quantum``, the frame's rounding step) or into near black (below ``dark``)."""
+    count = profiles.shape[1]
+    inner = profiles[rays, np.maximum(index - half, 0)]
+    outer = profiles[rays, np.minimum(index + half, count - 1)]
+    brightness_in = np.sqrt((inner * inner).sum(axis=1))
+    brightness_out = np.sqrt((outer * outer).sum(axis=1))
+    share = (outer @ colour) / max(float(colour @ colour), 1e-6)
+    off_axis = outer - share[:, None] * colour
+    off_axis = np.sqrt((off_axis * off_axis).sum(axis=1))
+    ball_like = (share < SHADING_SHARE) & (off_axis <= SHADING_TOLERANCE * brightness_out + quantum)
+    return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
+
+
+def _crossings(profiles: np.ndarray, index: np.ndarray,
+               half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-sample position (in samples) of the 50 % crossing between the levels ``half``
+    samples inside and outside each ray's edge ``index``, whether it is well defined, and the
+    contrast between those levels."""
+    rays, count = profiles.shape[:2]
+    rows = np.arange(rays)
+    offsets = np.arange(-half, half + 1)
+    window = np.clip(index[:, None] + offsets[None, :], 0, count - 1)
+    values = profiles[rows[:, None], window]                      # rays x (2 half + 1) x 3
+    level_in, level_out = values[:, 0], values[:, -1]
+    contrast = level_in - level_out
+    norm = np.einsum("ij,ij->i", contrast, contrast)
+    share = np.einsum("ijk,ik->ij", values - level_out[:, None, :], contrast)
+    share /= np.maximum(norm, 1e-9)[:, None]
+    above = share >= 0.5
+    # the outermost sample still at least half way to the inside level, and the next one
+    last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
+    s0, s1 = share[rows, last], share[rows, last + 1]
+    fraction = np.where(s0 - s1 > 1e-6, (s0 - 0.5) / np.maximum(s0 - s1, 1e-6), 0.0)
+    position = index + offsets[last] + np.clip(fraction, 0.0, 1.0)
+    return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
+
+
+def _geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
+                      iterations: int = 3) -> tuple[float, float, float]:
+    """Gauss-Newton refinement of a circle on the geometric distances of points to it."""
+    for _ in range(iterations):
+        dx, dy = px - x, py - y
+        distance = np.maximum(np.hypot(dx, dy), 1e-9)
+        ux, uy = dx / distance, dy / distance
+        residual = distance - radius
+        # normal equations of the Jacobian (-ux, -uy, -1)
+        normal = np.array([[ux @ ux, ux @ uy, ux.sum()], [ux @ uy, uy @ uy, uy.sum()],
+                           [ux.sum(), uy.sum(), float(ux.size)]])
+        gradient = np.array([ux @ residual, uy @ residual, residual.sum()])
+        try:
+            delta = np.linalg.solve(normal, gradient)
+        except np.linalg.LinAlgError:
+            break
+        if not np.all(np.isfinite(delta)):
+            break
+        x, y, radius = x + float(delta[0]), y + float(delta[1]), radius + float(delta[2])
+        if float(np.abs(delta).sum()) < 1e-3:
+            break
+    return x, y, radius
+
+
+def _robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
+                   rounds: tuple, geometric: bool) -> tuple[float, float, float, np.ndarray] | None:
+    """Circle through the points near (x, y, radius), in rounds of ever tighter tolerance
+    (algebraic fits, then optionally a geometric one); also returns which points lie on it."""
+    for tolerance_ratio, tolerance_floor in rounds:
+        residual = np.hypot(px - x, py - y) - radius
+        keep = np.abs(residual) < max(tolerance_floor, tolerance_ratio * radius)
+        if np.count_nonzero(keep) < 8:
+            return None
+        fitted = _fit_circle(px[keep] - x, py[keep] - y)
+        if fitted is None:
+            return None
+        x, y, radius = x + fitted[0], y + fitted[1], fitted[2]
+    if geometric:
+        x, y, radius = _geometric_circle(px[keep], py[keep], x, y, radius)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(radius) and radius > 0):
+            return None
+    residual = np.hypot(px - x, py - y) - radius
+    return x, y, radius, np.abs(residual) < max(rounds[-1][1], rounds[-1][0] * radius)
+
+
+def _silhouette(frame: np.ndarray, mask: np.ndarray, planes_gain: float, reference: float,
+                ball: "_Candidate", others: list) -> tuple[float, float, float] | None:
+    """The ball's outline located on the frame itself, to a fraction of a pixel.
+
+    Along rays from the centre, the colour edges from just inside the colour mask's circle
+    outwards are located at their 50 % crossing (so blur, which spreads the colour mask, does
+    not move them) and a circle is fitted to them robustly. Wide rounds, each from the last
+    circle, look for the outline either as each ray's first edge that is not shading (a ball
+    in front of other edges) or as its outermost edge (a dark side that the colour mask
+    misses); the hypothesis that more rays agree on wins (about as many: the larger circle,
+    if it fits about as closely). A narrow round then takes each
+    ray's edge nearest the circle. None when too few rays see an edge, when they see it on
+    one side only, or when the result does not contain most of the colour mask's circle.
+
+    Rays are used only within the frame (a ball cut by its edge keeps the visible arc) and not
+    towards ``others`` (touching balls); a ray whose edge has colour-mask pixels just past it
+    (yellow-green clutter touching the ball) is left out.
+    """
+    height, width = mask.shape
+    x0, y0, r0 = ball.x, ball.y, ball.radius
+    reach = SILHOUETTE_REACH * r0 + 6
+    box = _box(x0, y0, reach, width, height)
+    if box is None:
+        return None
+    left, top = box[1].start, box[0].start
+    patch = frame[box].astype(np.float32)
+    patch_mask = mask[box]
+    # The ball's colour: the mean of its lit, colour-mask part.
+    disc = _disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0) & cv2.inRange(patch_mask, 255, 255)
+    if not cv2.countNonZero(disc):
+        return None
+    colour = np.array(cv2.mean(patch, disc)[:3], np.float32)
+    dark = DARK_SHARE * reference
+
+    x, y, radius = x0 - left, y0 - top, r0
+    wide_rounds = 0
+    while True:
+        wide = wide_rounds < SILHOUETTE_WIDE_ROUNDS
+        samples = int(min(WIDE_RAYS if wide else NARROW_RAYS, max(24, round(2 * math.pi * radius))))
+        directions = _rim_directions(samples)
+        cos, sin = directions[0], directions[1]
+        if wide:  # from just inside the circle to well past it
+            start = radius - min(EDGE_MARGIN + 0.15 * radius, 0.4 * radius)
+            stop, step = 1.6 * radius + 2, max(RAY_STEP, radius / 60.0)
+            rounds = ((0.3, 2.0), (0.1, 1.0))
+        else:  # a narrow band around the circle found
+            band = max(1.5, 0.15 * radius)
+            start, stop, step = radius - band, radius + band, RAY_STEP
+            rounds = ((0.08, 1.0), (0.05, 0.6), (0.03, 0.45))
+        half = max(1, int(round(min(EDGE_HALF_WIDTH, 0.3 * radius) / step)))
+        radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
+                          dtype=np.float32)
+        profiles, enter, leave = _ray_profiles(patch, x, y, radii, directions)
+        # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
+        # room for the levels around an edge.
+        margin = (half + 1) * step
+        allowed = ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
+                   & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
+        usable = allowed.any(axis=1)
+        for other in others:  # rays towards another ball see its colour, not this outline
+            dx, dy = other.x - left - x, other.y - top - y
+            distance = math.hypot(dx, dy)
+            if 1e-6 < distance < stop + 1.15 * other.radius + 1:
+                half_angle = math.asin(min(1.0, (1.15 * other.radius + 1) / distance))
+                bearing = math.cos(half_angle)
+                usable &= (cos * dx + sin * dy) / distance < bearing
+        allowed &= usable[:, None]
+        in_view = np.count_nonzero(usable)
+        # (the rays in view of a ball cut by the frame's edge all point one way)
+        one_sided = max(0.7, math.hypot(cos[usable].mean(), sin[usable].mean()) + 0.1) if in_view else 0.7
+        peak, has_edge, gradient = _edge_peaks(profiles, allowed)
+        if wide:
+            ray_index, sample_index = np.nonzero(peak)
+            outline = peak.copy()
+            outline[ray_index, sample_index] = ~_shading(profiles, ray_index, sample_index, colour,
+                                                         half, planes_gain, dark)
+            first = np.argmax(outline, axis=1)
+            outermost = peak.shape[1] - 1 - np.argmax(peak[:, ::-1], axis=1)
+            choices = [(first, outline.any(axis=1))]
+            if np.count_nonzero((first != outermost) & has_edge) >= 0.15 * samples:
+                choices.append((outermost, has_edge))
+        else:
+            away = np.where(peak, np.abs(radii - radius)[None, :], np.inf)
+            choices = [(np.argmin(away, axis=1), has_edge)]
+        fits = []
+        for index, found in choices:
+            position, defined, contrast = _crossings(profiles, index, half)
+            rho = radii[0] + position * step
+            px, py = x + cos * rho, y + sin * rho
+            # The colour mask must not go on past the edge (clutter touching the ball).
+            beyond = rho + max(2.0, 0.12 * radius)
+            bx = np.clip(np.rint(x + cos * beyond), 0, patch.shape[1] - 1).astype(np.intp)
+            by = np.clip(np.rint(y + sin * beyond), 0, patch.shape[0] - 1).astype(np.intp)
+            good = usable & has_edge & found & defined & (patch_mask[by, bx] != 255)
+            if np.count_nonzero(good) < max(8, 0.35 * in_view):
+                continue
+            fitted = _robust_circle(px[good], py[good], x, y, radius, rounds, geometric=not wide)
+            if fitted is None:
+                continue
+            keep = fitted[3]
+            if (np.count_nonzero(keep) < max(8, 0.3 * in_view)
+                    or math.hypot(cos[good][keep].mean(), sin[good][keep].mean()) > one_sided
+                    or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
+                continue  # the edge seen on too few rays, or on one side only
+            residual = np.hypot(px[good][keep] - fitted[0], py[good][keep] - fitted[1]) - fitted[2]
+            # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
+            slope = gradient[np.arange(samples), index][good][keep] / (2 * step)
+            width = contrast[good][keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+            fits.append((fitted[:3], np.count_nonzero(keep), float(np.sqrt(np.mean(residual * residual))),
+                         float(np.median(width))))
+        # The hypothesis most rays agree on; among about equally good ones the larger circle
+        # (the outline is the outermost circle; shading edges inside a small ball fit too).
+        best = None
+        if fits:
+            most = max(fit[1] for fit in fits)
+            tightest = min(fit[2] for fit in fits if fit[1] >= most / 1.05)
+            chosen = max((fit for fit in fits if fit[1] >= most / 1.05 and fit[2] <= 1.5 * tightest + 0.05),
+                         key=lambda fit: fit[0][2])
+            best, sigma = chosen[0], chosen[3]
+        if best is None:
+            return None
+        grown = best[2] - radius
+        x, y, radius = best[:3]
+        if not wide:
+            # The 50 % contour of a disc blurred by sigma lies sigma^2 / 2r inside its edge.
+            radius += min(sigma, BLUR_LIMIT) ** 2 / (2.0 * radius)
+            break
+        # Each wide round starts from the last circle, reaching further into a dark side;
+        # once the circle stops growing (no dark side, or all of it), the narrow round.
+        wide_rounds = SILHOUETTE_WIDE_ROUNDS if grown < 0.05 * radius + 0.3 else wide_rounds + 1
+    x, y = x + left, y + top
+    # The colour mask's circle is the outline or a lit part inside it (a dark side it misses).
+    shift = math.hypot(x - x0, y - y0)
+    if not (0.85 * r0 - 1.0 <= radius <= 2.2 * r0 + 2.0 and shift + 0.7 * r0 <= radius + 1.0):
+        return None
+    return x, y, radius
+
+
+def _dark_side(frame: np.ndarray, mask: np.ndarray, ball: "_Candidate") -> bool:
+    """Whether the disc of ``ball`` holds a dark side: a good part of it out of the colour
+    mask and clearly darker than the part in it (not a hole, a logo or a box's corner)."""
+    height, width = mask.shape
+    box = _box(ball.x, ball.y, ball.radius, width, height)
+    if box is None:
+        return False
+    disc = _disc(mask[box].shape, ball.x - box[1].start, ball.y - box[0].start, 0.95 * ball.radius)
+    lit = cv2.inRange(mask[box], 255, 255) & disc
+    unlit = cv2.bitwise_not(cv2.inRange(mask[box], 255, 255)) & disc
+    total, lit_count = cv2.countNonZero(disc), cv2.countNonZero(lit)
+    if not total or not lit_count or cv2.countNonZero(unlit) < DARK_SIDE_SHARE * total:
+        return False
+    patch = frame[box]
+    brightness = np.maximum(np.maximum(patch[:, :, 0], patch[:, :, 1]), patch[:, :, 2])
+    return cv2.mean(brightness, unlit)[0] <= DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
+
+
+def _dark_around(frame: np.ndarray, mask: np.ndarray, ball: "_Candidate") -> bool:
+    """Whether at least DARK_SIDE_SHARE of the ring just around ``ball`` (r to 1.5 r) is at
+    most DARK_SIDE_LEVEL times as bright as the colour inside it: where a dark side may be."""
+    height, width = mask.shape
+    outer = 1.5 * ball.radius + 1
+    box = _box(ball.x, ball.y, outer, width, height)
+    if box is None:
+        return False
+    x, y = ball.x - box[1].start, ball.y - box[0].start
+    shape = mask[box].shape
+    inner = _disc(shape, x, y, ball.radius)
+    lit = cv2.inRange(mask[box], 255, 255) & inner
+    ring = _disc(shape, x, y, outer) & cv2.bitwise_not(inner)
+    ring_count = cv2.countNonZero(ring)
+    if not ring_count or not cv2.countNonZero(lit):
+        return False
+    patch = frame[box]
+    brightness = np.maximum(np.maximum(patch[:, :, 0], patch[:, :, 1]), patch[:, :, 2])
+    level = DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
+    dark = cv2.inRange(brightness, 0, max(0.0, level)) & ring
+    return cv2.countNonZero(dark) >= DARK_SIDE_SHARE * ring_count
+
+
 @dataclass
 class _Planes:
     """Per-frame images shared by the candidate checks (all at processing size)."""
@@ -240,6 +595,7 @@ class _Search:
     boundary_y: np.ndarray
     min_radius: float
     max_radius: float
+    small_radius: float
     scale: float            # processing size / input size
 
 
@@ -385,7 +741,8 @@ class BallDetector:
         boundary[:, 0] = boundary[:, -1] = 0
         points = cv2.findNonZero(boundary)
         points = np.zeros((0, 2), np.float64) if points is None else points.reshape(-1, 2).astype(np.float64)
-        search = _Search(planes, points[:, 0].copy(), points[:, 1].copy(), min_radius, max_radius, scale)
+        search = _Search(planes, points[:, 0].copy(), points[:, 1].copy(), min_radius, max_radius,
+                         max(1.0, cfg.small_radius * scale), scale)
 
         measured: list[tuple[_Candidate, dict]] = []
         for contour in contours:
@@ -476,7 +833,8 @@ class BallDetector:
             candidate = self._refine(proposal, search)
             if candidate is None:
                 continue
-            if not (search.min_radius <= candidate.radius <= search.max_radius):
+            # (the colour of a ball with a dark side, no ambient light, may be a smaller cap)
+            if not (LIT_CAP_SHARE * search.min_radius <= candidate.radius <= search.max_radius):
                 continue
             if any(math.hypot(candidate.x - other.x, candidate.y - other.y) < 0.1 * other.radius + 0.5
                    and abs(candidate.radius - other.radius) < 0.1 * other.radius + 0.5
@@ -487,7 +845,7 @@ class BallDetector:
             if metrics is None:
                 continue
             metrics.update(self._colour_stats(candidate, search.planes))
-            metrics["size"] = candidate.radius / search.min_radius
+            metrics["size"] = candidate.radius / search.small_radius
             metrics["clean"] = (metrics["leak"] <= 0.05 and metrics["outside"] <= 0.05
                                 and metrics["support"] >= 0.8 and metrics["fill"] >= 0.85)
             results.append((candidate, metrics))
@@ -517,6 +875,7 @@ class BallDetector:
                 if score is not None and all(_circle_overlap(candidate, other) < 0.3
                                              for other in accepted + newly):
                     candidate.score = score
+                    candidate.needs_outline = metrics["size"] < 1.0
                     newly.append(candidate)
                 else:
                     still.append((candidate, metrics))
@@ -540,8 +899,65 @@ class BallDetector:
             pending.sort(key=lambda item: item[0].score, reverse=True)
         accepted.sort(key=lambda c: c.score, reverse=True)
         accepted = accepted[:cfg.max_detections]
+        accepted = self._outlines(accepted, still, explained, search)
         accepted.sort(key=lambda c: c.radius, reverse=True)
         return accepted
+
+    def _outlines(self, accepted: list[_Candidate], rejected: list[tuple[_Candidate, dict]],
+                  explained: np.ndarray, search: _Search) -> list[_Candidate]:
+        """Every accepted ball's circle replaced by its outline found on the frame (see
+        _silhouette); then rejected candidates with a dark side looked at again.
+
+        Under a light with no ambient, a ball's unlit side is black: its colour is a lit cap
+        whose rim is part circle, part shading, which the candidate checks take for a corner
+        or a ragged blob. If the frame shows an outline around the cap, with all the colour
+        inside it (no leak past its rim, the rim a colour edge over min_edge_support of it) and
+        a dark side within it (_dark_side), the outline is the ball; its score is the mean of
+        its fill and rim support, which a dark side lowers (it is not held to min_score).
+        """
+        cfg = self.config
+        planes = search.planes
+        kept: list[_Candidate] = []
+        for ball in accepted:
+            outline = _silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
+                                  [other for other in accepted if other is not ball])
+            if outline is not None:
+                ball.x, ball.y, ball.radius = outline
+            elif ball.needs_outline:
+                continue
+            if ball.radius >= search.min_radius:
+                kept.append(ball)
+        attempts = 0
+        for candidate, metrics in sorted(rejected, key=lambda item: item[0].radius, reverse=True):
+            if attempts >= DARK_SIDE_ATTEMPTS or len(kept) >= cfg.max_detections:
+                break
+            if (metrics["colourfulness"] < cfg.min_colourfulness
+                    or any(_circle_overlap(candidate, other) >= 0.3 for other in kept)):
+                continue
+            # (a cheap look first: is there anything dark around the colour at all?)
+            if not _dark_around(planes.frame, planes.mask, candidate):
+                continue
+            attempts += 1
+            outline = _silhouette(planes.frame, planes.mask, planes.gain, planes.reference,
+                                  candidate, kept)
+            if outline is None:
+                continue
+            ball = _Candidate(*outline)
+            if (ball.radius < search.min_radius
+                    or any(_circle_overlap(ball, other) >= 0.3 for other in kept)
+                    or not _dark_side(planes.frame, planes.mask, ball)):
+                continue
+            measured = self._measure(ball, explained)
+            if (measured is None or measured["leak"] > 0.05 or measured["outside"] > 0.05
+                    or measured["support"] < cfg.min_edge_support
+                    or measured["visible"] < max(cfg.min_visible_fraction,
+                                                 min(1.0, search.small_radius / ball.radius))):
+                continue
+            ball.score = max(0.0, min(1.0, (measured["fill"] + measured["support"]) / 2.0))
+            if self._debug is not None:
+                self._debug.append((ball, {**metrics, **measured, "dark_side": True}, ball.score))
+            kept.append(ball)
+        return kept
 
     def _leftover_candidates(self, balls: list[_Candidate], explained: np.ndarray,
                              search: _Search) -> list[tuple[_Candidate, dict]]:
@@ -695,8 +1111,9 @@ class BallDetector:
         cfg = self.config
         clutter = metrics["leak"] + metrics["outside"]
         # A circle cut by the frame edge must still show as much rim as a whole ball of
-        # min_radius has: a few pixels of arc at the border prove nothing.
-        if (metrics["visible"] < max(cfg.min_visible_fraction, 1.0 / metrics["size"])
+        # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
+        # than that must be whole, and have its outline found (see _outlines).
+        if (metrics["visible"] < max(cfg.min_visible_fraction, min(1.0, 1.0 / metrics["size"]))
                 or metrics["fill"] < cfg.min_fill_ratio
                 or metrics["support"] < cfg.min_edge_support + clutter
                 or metrics["outside"] > cfg.max_outside_ratio

@@ -67,6 +67,9 @@ class SimulatorConfig:
     # Published image encoding ("rgb8", "bgr8" or "jpeg") and the JPEG quality (1..100).
     encoding: str = "rgb8"
     jpeg_quality: int = 90
+    # Publish camera/image_raw; false stops the frames (a failed camera) while the world, the
+    # clock and the ground truth go on. Changed live, e.g. to test the follower's search.
+    publish_images: bool = True
     # Optional recordings: an .mp4/.avi of the rendered frames, a JSON-lines ground-truth log.
     video_path: str = ""
     ground_truth_path: str = ""

@@ -9,12 +9,14 @@ the safety stop zeroes it after ``cmd_timeout`` simulated seconds without one); 
 CameraInfo; ``sim/control``: SimCommand -> SimReply (client: services/simulator/control.py).
 Stats add ``real_time_factor``, ``render_ms``, ``lockstep_timeouts``, ``frames``; ``dropped``
 counts realtime schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``,
-``encoding`` and ``jpeg_quality`` may be changed live through ``simulator/config``.
+``encoding``, ``jpeg_quality`` and ``publish_images`` (false: no more frames, as from a failed
+camera; the world, clock and ground truth go on) may be changed live through ``simulator/config``.
 
 Lockstep, per frame k: image_raw + ground_truth; wait for ``detected_balls`` seq k (if a
-detector is alive); clock; if a follower is alive and its simulated-time timer fires on this
-clock, wait for its cmd_vel whose added ``time`` field equals this stamp; step. Each wait gives
-up after ``lockstep_timeout`` wall seconds (counted), so the same seed gives the same run.
+detector is alive and the image was published); clock; if a follower is alive and its
+simulated-time timer fires on this clock, wait for its cmd_vel whose added ``time`` field
+equals this stamp; step. Each wait gives up after ``lockstep_timeout`` wall seconds (counted),
+so the same seed gives the same run.
 
 Example:
     python -m services.simulator --set scenario=chase --set pacing=lockstep --set seed=3
@@ -37,7 +39,7 @@ from services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
 from services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
 
 LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
-                 "encoding", "jpeg_quality"}
+                 "encoding", "jpeg_quality", "publish_images"}
 
 
 def image_message(rgb, head: dict, config: SimulatorConfig) -> dict:
@@ -132,10 +134,12 @@ def build(service: ServiceContext):
             apply_commands()
             now = simulation.step_frame(time.time())
             head = header(simulation.stamp_ns, simulation.frame_index)
-            started = time.perf_counter()
-            rgb = simulation.render()
-            render_seconds.append(time.perf_counter() - started)
-            timing["render_ms"] = 1000 * sum(render_seconds) / len(render_seconds)  # last 100
+            rgb = None
+            if config.publish_images or recorder is not None:
+                started = time.perf_counter()
+                rgb = simulation.render()
+                render_seconds.append(time.perf_counter() - started)
+                timing["render_ms"] = 1000 * sum(render_seconds) / len(render_seconds)  # last 100
             truth = simulation.ground_truth()
             if recorder is not None:
                 recorder.write(simulation, rgb, truth)
@@ -146,7 +150,8 @@ def build(service: ServiceContext):
             service.stats.count("dropped", pacer.slips - slips)
         else:
             pacer.reset()
-        images.put(image_message(rgb, head, config))
+        if config.publish_images:
+            images.put(image_message(rgb, head, config))
         truths.put({"header": head, **truth})
         if now + 1e-6 >= next_info:  # (the core sums time steps: 0.99999... is 1 s)
             infos.put(camera_info())
@@ -154,7 +159,7 @@ def build(service: ServiceContext):
         # Lockstep: time moves on once the detector has answered this frame, and, on the
         # frames whose clock makes the follower's timer fire, once its command is applied.
         lockstep = config.pacing == "lockstep"
-        if lockstep and gate.alive("detector"):
+        if lockstep and config.publish_images and gate.alive("detector"):
             gate.wait_answer(head["seq"], config.lockstep_timeout)
         if service.stop.is_set():
             return next_info

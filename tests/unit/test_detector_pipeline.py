@@ -2,7 +2,10 @@
 
 Synthetic balls are shaded yellow-green discs drawn with sub-pixel accuracy (4x4 supersampled
 coverage) on a textured grey floor; dark versions scale the whole frame down to a few pixel
-units, as the simulator's dimmest lights do.
+units, as the simulator's dimmest lights do. The sub-pixel tests also use the integration
+tests' ball (tests/harness.py, blurred), pre-blurred and JPEG frames, strongly shaded balls and
+balls whose unlit side is black. Every found ball must be within 0.5 px (centre) and 3 % or
+0.3 px (radius) of the truth unless a test says otherwise.
 """
 
 import dataclasses
@@ -18,6 +21,7 @@ from common.config import ConfigError, load_config
 from experiments.real_photos import score_folder, score_image
 from services.detector.config import DetectorConfig
 from services.detector.pipeline import BallDetector, Detection, DetectionResult, annotate
+from tests import harness
 
 TENNIS_BGR = (40, 225, 190)  # yellow-green felt under white light (H ~36, S ~210)
 REAL_DEV_SET = Path(__file__).resolve().parents[3] / "shared/data/real_tennis_dev"
@@ -85,12 +89,12 @@ def detector():
     return BallDetector(DetectorConfig())
 
 
-def assert_found(detections, u, v, radius, centre_tolerance=1.5, radius_tolerance=0.10):
+def assert_found(detections, u, v, radius, centre_tolerance=0.5, radius_tolerance=0.03):
     assert detections, f"no ball found, expected ({u:.1f}, {v:.1f}, r={radius:.1f})"
     best = min(detections, key=lambda d: math.hypot(d.u - u, d.v - v))
     error = math.hypot(best.u - u, best.v - v)
     assert error <= centre_tolerance, f"centre off by {error:.2f} px: {best} vs ({u}, {v})"
-    assert abs(best.radius_px - radius) <= radius_tolerance * radius, \
+    assert abs(best.radius_px - radius) <= max(radius_tolerance * radius, 0.3), \
         f"radius {best.radius_px:.2f} vs {radius}"
     return best
 
@@ -106,8 +110,7 @@ def test_finds_one_ball_of_any_size_anywhere(detector, radius, u, v):
 
 
 def test_finds_a_ball_filling_much_of_the_frame(detector):
-    assert_found(detector.detect(scene([(330.0, 260.0, 150.0)])).detections, 330.0, 260.0, 150.0,
-                 centre_tolerance=3.0)
+    assert_found(detector.detect(scene([(330.0, 260.0, 150.0)])).detections, 330.0, 260.0, 150.0)
 
 
 def test_no_detection_on_ball_free_frames(detector):
@@ -156,7 +159,8 @@ def test_dark_distractors_give_nothing(detector):
 def test_finds_balls_cut_by_the_frame_edge(detector, u, v, radius):
     result = detector.detect(scene([(u, v, radius)]))
     assert len(result.detections) == 1, result.detections
-    assert_found(result.detections, u, v, radius)
+    # (only the arc in view locates the circle: the centre is a little less certain)
+    assert_found(result.detections, u, v, radius, centre_tolerance=0.75)
 
 
 def test_two_touching_balls_are_two_detections_largest_first(detector):
@@ -185,6 +189,111 @@ def test_detections_are_sorted_largest_first(detector):
     radii = [d.radius_px for d in result.detections]
     assert radii == sorted(radii, reverse=True)
     assert_found(result.detections[:1], 500.0, 120.0, 30.0)
+
+
+# ------------------------------------------------------------------- sub-pixel outline
+# The colour mask's edge lies where blur has spread the colour, 0.5-1 px outside the ball
+# whatever its size, and a strongly shaded side pulls the mask's centre towards the lit side;
+# the detector reports the outline found on the frame instead. Tolerances: the radius within
+# 3 % or 0.3 px (the locator's distance error is the radius error), the centre within 0.5 px.
+SIZES = [3.5, 5.0, 8.0, 13.0, 21.0, 34.0, 55.0, 90.0, 150.0]
+POSITIONS = [(320.3, 240.6), (301.55, 262.35), (338.8, 228.15)]
+
+
+def blurred_scene(u, v, radius, seed=0):
+    """The integration tests' ball (tests/harness.py: anti-aliased, then 3x3 Gaussian blur)."""
+    return harness.draw_ball(to_uint8(floor(seed=seed)), u, v, radius)
+
+
+def jpeg(image, quality=80):
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    assert ok
+    return cv2.imdecode(data, cv2.IMREAD_COLOR)
+
+
+@pytest.mark.parametrize("radius", SIZES)
+def test_outline_of_blurred_balls_to_a_fraction_of_a_pixel(detector, radius):
+    # Before the outline was located on the frame, radii came out +0.5-0.6 px here (+14 % at
+    # 3.5 px, +6 % at 8 px, +2.8 % at 21 px).
+    for index, (u, v) in enumerate(POSITIONS):
+        result = detector.detect(blurred_scene(u, v, radius, seed=index))
+        assert len(result.detections) == 1, result.detections
+        assert_found(result.detections, u, v, radius)
+
+
+@pytest.mark.parametrize("radius", [8.0, 13.0, 21.0, 34.0, 55.0, 90.0])
+def test_outline_of_pre_blurred_balls(detector, radius):
+    # A soft camera: the whole frame blurred again (5x5 Gaussian) on top of the ball's own edge.
+    for index, (u, v) in enumerate(POSITIONS):
+        image = cv2.GaussianBlur(scene([(u, v, radius)], seed=index), (5, 5), 0)
+        assert_found(detector.detect(image).detections, u, v, radius)
+
+
+@pytest.mark.parametrize("radius", [10.0, 13.0, 21.0, 34.0, 55.0, 90.0])
+def test_outline_of_balls_in_jpeg_frames(detector, radius):
+    for index, (u, v) in enumerate(POSITIONS):
+        image = jpeg(blurred_scene(u, v, radius, seed=index))
+        assert_found(detector.detect(image).detections, u, v, radius)
+
+
+@pytest.mark.parametrize("radius", [44.0, 80.0, 130.0])
+def test_centre_of_a_strongly_shaded_large_ball(detector, radius):
+    # The shaded side (12 % of the lit colour) drops out of the colour mask's edge; the mask's
+    # centre was 1.2-2.9 px towards the lit side at these sizes.
+    for u, v in POSITIONS[:2]:
+        image = to_uint8(draw_ball(floor(), u, v, radius, shade_floor=0.12))
+        assert_found(detector.detect(image).detections, u, v, radius)
+
+
+def draw_lit_from_above(image, u, v, radius, colour=TENNIS_BGR):
+    """A ball under a light from above with no ambient light: its lower part is black."""
+    height, width = image.shape[:2]
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    nx, ny = (xs - u) / radius, (ys - v) / radius
+    nz = np.sqrt(np.clip(1.0 - nx * nx - ny * ny, 0.0, 1.0))
+    light = np.clip(-0.8 * ny + 0.6 * nz, 0.0, 1.0)
+    ball = np.array(colour, np.float32)[None, None, :] * light[..., None]
+    cover = coverage(image.shape, u, v, radius)[..., None]
+    return image * (1.0 - cover) + ball * cover
+
+
+@pytest.mark.parametrize("radius", [6.0, 12.0, 30.0, 60.0])
+def test_a_ball_with_a_black_side_is_found_whole(detector, radius):
+    # No ambient light: the lower third of the ball is black, out of the colour mask, so the
+    # colour alone gives a cap. The outline around the cap is the ball.
+    u, v = 300.4, 250.7
+    image = to_uint8(draw_lit_from_above(floor(), u, v, radius))
+    result = detector.detect(image)
+    disc = coverage(image.shape, u, v, radius) > 0.5
+    assert np.count_nonzero(result.mask[disc]) < 0.85 * np.count_nonzero(disc)  # a cap, really
+    assert len(result.detections) == 1, result.detections
+    assert_found(result.detections, u, v, radius)
+
+
+@pytest.mark.parametrize("radius", [3.5, 4.2])
+def test_far_balls_of_a_few_pixels(detector, radius):
+    # A tennis ball 4-5 m away: 3.5-4.5 px.
+    for index, (u, v) in enumerate(POSITIONS):
+        result = detector.detect(scene([(u, v, radius)], seed=index))
+        assert len(result.detections) == 1, result.detections
+        assert_found(result.detections, u, v, radius)
+
+
+def test_nothing_smaller_than_min_radius(detector):
+    assert detector.detect(scene([(320.3, 240.6, 2.4)])).detections == []
+    small = BallDetector(DetectorConfig(min_radius=8))
+    assert small.detect(scene([(320.3, 240.6, 6.0)])).detections == []
+    assert_found(small.detect(scene([(320.3, 240.6, 9.0)])).detections, 320.3, 240.6, 9.0)
+
+
+def test_touching_balls_keep_their_outlines(detector):
+    # Rays towards the neighbour see its colour, not this ball's outline: they are left out.
+    first, second = (250.3, 260.2, 30.0), (250.3 + 30.0 + 18.0, 260.2 + 4.0, 18.0)
+    image = harness.draw_ball(harness.draw_ball(to_uint8(floor()), *first), *second)
+    result = detector.detect(image)
+    assert len(result.detections) == 2, result.detections
+    assert_found(result.detections[:1], *first)
+    assert_found(result.detections[1:], *second)
 
 
 # ------------------------------------------------------------------------ distractors
@@ -228,7 +337,7 @@ def test_any_frame_size(detector, width, height):
     result = detector.detect(scene([(u, v, radius)], width=width, height=height))
     assert result.mask.shape == (height, width)
     assert len(result.detections) == 1, result.detections
-    assert_found(result.detections, u, v, radius, centre_tolerance=1.5 * max(1.0, scale))
+    assert_found(result.detections, u, v, radius, centre_tolerance=0.5 * max(1.0, scale))
 
 
 def test_mono_frames_give_no_ball_and_grey_arrays_are_accepted(detector):
@@ -280,6 +389,7 @@ def test_annotate_draws_on_a_copy(detector):
     ({"dp": 0.5}, "dp"), ({"min_dist": 0.0}, "min_dist"), ({"param1": -1.0}, "param1"),
     ({"param2": float("nan")}, "param2"), ({"min_radius": 0}, "min_radius"),
     ({"min_radius": 10, "max_radius": 8}, "max_radius"), ({"max_radius": -5}, "max_radius"),
+    ({"small_radius": 0}, "small_radius"), ({"min_visible_fraction": 1.2}, "min_visible_fraction"),
     ({"blur_kernel": 4}, "blur_kernel"), ({"blur_kernel": 5.0}, "blur_kernel"),
     ({"clahe_clip_limit": -1.0}, "clahe_clip_limit"), ({"clahe_tile_grid": 0}, "clahe_tile_grid"),
     ({"max_gain": 0.5}, "max_gain"), ({"gain_target": 0.0}, "gain_target"),
@@ -327,6 +437,6 @@ def test_real_tennis_dev_set():
     labels = json.loads((REAL_DEV_SET / "labels.json").read_text())
     assert result["images"] == len(labels) == 10
     assert result["labelled"] == 11
-    assert result["recall"] >= 10 / 11, result
-    assert result["false_positives_per_image"] <= 0.3, result
+    assert result["recall"] == 1.0, result
+    assert result["false_positives_per_image"] <= 0.1, result
     assert set(result["files"]) == set(labels)
