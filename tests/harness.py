@@ -34,6 +34,8 @@ def process_environment() -> dict:
     environment.setdefault("MUJOCO_GL", "egl")
     environment["PYTHONPATH"] = str(REPO) + os.pathsep + environment.get("PYTHONPATH", "")
     environment["PYTHONUNBUFFERED"] = "1"
+    # A process that hangs on SIGTERM gets SIGABRT from Process.stop: dump its threads' stacks.
+    environment["PYTHONFAULTHANDLER"] = "1"
     return environment
 
 
@@ -67,8 +69,12 @@ class Process:
             try:
                 self.popen.wait(timeout)
             except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait()
+                self.popen.send_signal(signal.SIGABRT)  # faulthandler writes every thread's stack
+                try:
+                    self.popen.wait(5)
+                except subprocess.TimeoutExpired:
+                    self.popen.kill()
+                    self.popen.wait()
                 self._log.close()
                 raise AssertionError(f"{self.arguments} ignored SIGTERM for {timeout} s:\n{self.output()}")
         self._log.close()

@@ -48,6 +48,10 @@ class FollowerConfig:
     # follows ``detected_ball`` (the largest) as the original node does.
     keep_target: bool = True
     target_gate: float = 0.3
+    # How long other balls are ignored after the target was last matched: long enough to ride
+    # out a missed frame or two, short enough that a target that jumped (or was replaced) is
+    # re-acquired quickly.
+    target_hold_secs: float = 0.3
 
     def __post_init__(self):
         self.rcv_timeout_secs = _number("rcv_timeout_secs", self.rcv_timeout_secs)
@@ -74,6 +78,9 @@ class FollowerConfig:
         self.target_gate = _number("target_gate", self.target_gate)
         if not 0.0 < self.target_gate <= 2.0:
             raise ConfigError(f"target_gate: must be in (0, 2] (normalised image units), got {self.target_gate!r}")
+        self.target_hold_secs = _number("target_hold_secs", self.target_hold_secs)
+        if self.target_hold_secs < 0.0:
+            raise ConfigError(f"target_hold_secs: must be >= 0, got {self.target_hold_secs!r}")
         for name in ("use_sim_time", "search_toward_last_seen", "reset_filter_on_reacquire",
                      "keep_target"):
             if not isinstance(getattr(self, name), bool):

@@ -126,11 +126,14 @@ class FollowerController:
         While tracking, the ball nearest the target's last position (distance in x plus the
         log-ratio of apparent sizes) if it lies within ``target_gate`` in x and within a factor
         of 1.5 in size, else None: the target is not in this frame, and another ball is not
-        taken for it. When not tracking, the largest ball (the paper's choice)."""
+        taken for it, until ``target_hold_secs`` have passed since the target was last seen.
+        When not tracking, or after the hold, the largest ball (the paper's choice)."""
         usable = [ball for ball in balls if math.isfinite(ball["x"]) and ball["z"] > 0]
         if not usable:
             return None
-        if not self.tracking(now) or self._last_x is None or not self._last_size:
+        holding = (self.tracking(now) and self._last_x is not None and self._last_size
+                   and now - self._last_seen <= self._config.target_hold_secs)
+        if not holding:
             return max(usable, key=lambda ball: ball["z"])
 
         def mismatch(ball: dict) -> float:

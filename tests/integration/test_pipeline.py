@@ -20,8 +20,11 @@ POINTS = [(0.0, 0.067, 0.4), (0.25, 0.067, 1.0), (-0.6, 0.067, 2.0), (0.5, 0.067
 
 @pytest.fixture
 def pipeline(router, session, log_dir):
-    processes = [start_service(name, router.endpoint, log_dir)
-                 for name in ("detector", "locator", "follower")]
+    # The ball jumps between frames here, so the follower steers by the largest ball as the
+    # paper's does (keep_target would rightly ignore a far jump for target_hold_secs).
+    processes = [start_service("detector", router.endpoint, log_dir),
+                 start_service("locator", router.endpoint, log_dir),
+                 start_service("follower", router.endpoint, log_dir, "--set", "keep_target=false")]
     liveliness = Liveliness(session)
     for name in ("detector", "locator", "follower"):
         liveliness.wait(name, timeout=40)

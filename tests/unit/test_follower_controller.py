@@ -269,9 +269,11 @@ def test_choose_takes_the_largest_until_tracking_then_keeps_the_target():
     # A bigger ball appears elsewhere: the target (moved a little) is kept.
     kept = controller.choose([_ball(-0.3, 0.2), _ball(0.35, 0.085)], 0.1)
     assert kept == _ball(0.35, 0.085)
-    # The target is gone from the frame: no ball is taken in its place.
-    assert controller.choose([_ball(-0.3, 0.2)], 0.2) is None
-    # After the timeout the target is lost: the largest again.
+    controller.on_detection(kept["x"], kept["z"], 0.1)
+    # The target is gone from the frame: no ball is taken in its place during the hold...
+    assert controller.choose([_ball(-0.3, 0.2)], 0.35) is None
+    # ...and after it (0.3 s since the target was last seen) the largest is taken again.
+    assert controller.choose([_ball(-0.3, 0.2)], 0.45) == _ball(-0.3, 0.2)
     assert controller.choose([_ball(-0.3, 0.2)], 5.0) == _ball(-0.3, 0.2)
 
 
@@ -286,5 +288,7 @@ def test_choose_rejects_balls_of_very_different_size_near_the_target():
 def test_target_gate_is_validated():
     with pytest.raises(ConfigError, match="target_gate"):
         FollowerConfig(target_gate=0.0)
+    with pytest.raises(ConfigError, match="target_hold_secs"):
+        FollowerConfig(target_hold_secs=-1.0)
     with pytest.raises(ConfigError, match="keep_target"):
         FollowerConfig(keep_target="yes")
