@@ -22,6 +22,7 @@ from common import keys as key_table
 from common.config import ConfigError, load_config, parse_overrides
 from common.keys import Keys
 from common.messages import SCHEMAS, SIM_OPS, MessageError, decode, encode
+from common.status import service_status
 from common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, add_session_arguments,
                             first_error_line, open_from_args, router_config)
 
@@ -99,27 +100,7 @@ def command_status(args) -> int:
     session = _open(args)
     if session is None:
         return 1
-    names = Keys(args.namespace)
-    alive = set()
-    for reply in session.liveliness().get(names("alive/*"), timeout=args.timeout):
-        if reply.ok is not None:
-            alive.add(names.strip(str(reply.ok.key_expr)).split("/", 1)[1])
-    stats: dict[str, dict] = {}
-    received_all = threading.Event()
-
-    def on_stats(sample):
-        try:
-            message = decode("Stats", sample.payload.to_bytes())
-        except MessageError:
-            return
-        stats[message["service"]] = message
-        if alive <= set(stats):
-            received_all.set()
-
-    subscriber = session.declare_subscriber(names("*/stats"), on_stats)
-    if alive:
-        received_all.wait(args.timeout + 1.5)  # stats come at 1 Hz
-    subscriber.undeclare()
+    alive, stats = service_status(session, args.namespace, args.timeout)
     session.close()
     print(f"{'service':<10} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
           f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7}")

@@ -24,8 +24,9 @@ import threading
 import time
 from pathlib import Path
 
-from common.keys import SERVICES, Keys, alive_key
+from common.keys import SERVICES, Keys
 from common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints, open_session
+from common.status import service_status
 from deploy.supervisor import (REPO, ChildSpec, SupervisorSettings, child_environment, describe_exit,
                                die_with_parent, pid_alive, save_launch, supervise)
 
@@ -169,33 +170,11 @@ def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.
 
 def network_status(info: dict, timeout: float) -> tuple[set[str] | None, dict[str, dict], str | None]:
     """(alive services or None if unreachable, stats per service, error)."""
-    from common.messages import MessageError, decode
-
-    keys = Keys(info.get("namespace", ""))
     try:
         session = open_for(info, timeout)
     except SessionOpenError as error:
         return None, {}, str(error)
-    alive: set[str] = set()
-    for reply in session.liveliness().get(keys("alive/*"), timeout=timeout):
-        if reply.ok is not None:
-            alive.add(keys.strip(str(reply.ok.key_expr)).split("/", 1)[1])
-    stats: dict[str, dict] = {}
-    complete = threading.Event()
-
-    def on_stats(sample):
-        try:
-            message = decode("Stats", sample.payload.to_bytes())
-        except MessageError:
-            return
-        stats[message["service"]] = message
-        if alive <= set(stats):
-            complete.set()
-
-    subscriber = session.declare_subscriber(keys("*/stats"), on_stats)
-    if alive:
-        complete.wait(2.5)  # stats come at 1 Hz
-    subscriber.undeclare()
+    alive, stats = service_status(session, info.get("namespace", ""), timeout)
     session.close()
     return alive, stats, None
 

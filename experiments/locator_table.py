@@ -16,7 +16,6 @@ Example::
 """
 
 import argparse
-import math
 
 import numpy as np
 

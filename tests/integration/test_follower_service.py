@@ -81,7 +81,7 @@ def test_sim_time_drives_timer_and_timeout(session, start_follower):
 
 
 def test_bad_input_config_and_clean_exit(session, start_follower):
-    follower = start_follower()
+    start_follower()
     commands = Collector(session, "cmd_vel", "Twist")
     stats = Collector(session, "follower/stats", "Stats")
     cases = garbage_payloads(detection(0.1, 0.05, 1))
