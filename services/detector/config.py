@@ -75,6 +75,14 @@ class DetectorConfig:
     # A noiseless render of a ball under a 0.01 diffuse light and no ambient has a chroma of
     # 1-2 units on its lit side, and a grey floor has 0; raise it for noisy dark cameras.
     min_chroma: float = 1.5
+    # Extremely dark frames: at a gain of at least dark_gain (0 = never) the colour is
+    # classified on a wider average (Gaussian blur of dark_blur_kernel px, odd) against a
+    # chroma floor of dark_min_chroma raw units, and the mask is not opened. A ball under a
+    # 0.01 diffuse light and no ambient is 1-2 grey levels above black: its lit cap averages
+    # a chroma of 1.2-2, a dim orange box or grey floor less (or a hue out of range).
+    dark_gain: float = 32.0
+    dark_blur_kernel: int = 9
+    dark_min_chroma: float = 1.2
     # Morphological clean-up of the mask (elliptic kernels, pixels; 0 or 1 = skip).
     open_kernel: int = 3
     close_kernel: int = 5
@@ -139,6 +147,13 @@ class DetectorConfig:
             raise ConfigError(f"max_gain: must be >= 1, got {self.max_gain}")
         if not (math.isfinite(self.min_chroma) and self.min_chroma >= 0):
             raise ConfigError(f"min_chroma: must be >= 0, got {self.min_chroma}")
+        if not (math.isfinite(self.dark_gain) and (self.dark_gain == 0 or self.dark_gain >= 1.0)):
+            raise ConfigError(f"dark_gain: must be 0 (off) or >= 1, got {self.dark_gain}")
+        if self.dark_blur_kernel < 1 or self.dark_blur_kernel % 2 == 0:
+            raise ConfigError(
+                f"dark_blur_kernel: must be an odd number >= 1, got {self.dark_blur_kernel}")
+        if not (math.isfinite(self.dark_min_chroma) and self.dark_min_chroma >= 0):
+            raise ConfigError(f"dark_min_chroma: must be >= 0, got {self.dark_min_chroma}")
         for name in ("open_kernel", "close_kernel"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name}: must be >= 0, got {getattr(self, name)}")

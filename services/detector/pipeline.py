@@ -10,7 +10,10 @@ The paper's pipeline, with the checks that make it hold up on real photos:
    saturation do not depend on brightness: a dark ball keeps its colour.
 3. Colour mask: the HSV ranges, and a chroma (max - min channel, raw units) of at least
    ``min_chroma``, below which a pixel's hue is rounding or sensor noise (a dark grey floor).
-4. Morphological opening and closing of the mask (specks out, seams and logos filled).
+4. Morphological opening and closing of the mask (specks out, seams and logos filled). In
+   extremely dark frames (gain >= ``dark_gain``: colour 1-2 grey levels above black) steps 2-4
+   work on wider averages instead (``dark_blur_kernel``, chroma floor ``dark_min_chroma``, no
+   opening), and the outline search (8) looks further past the colour (a small lit cap).
 5. Candidates per mask blob: its enclosing circle, and unless that circle is already a clean
    isolated ball, the Hough circle transform (cv2.HoughCircles with ``dp min_dist param1
    param2``, radii in ``min_radius..max_radius``) inside the blob's box, which splits touching
@@ -119,6 +122,11 @@ BLUR_LIMIT = 2.0
 NARROW_RAYS = 90
 # The search reaches this many times the colour mask's radius from its centre.
 SILHOUETTE_REACH = 2.6
+# Wide rounds look this many times the current radius (plus 2 px) from its centre; further in
+# extremely dark frames, whose colour mask is only the brightest part of a lit cap (the
+# outline of a ball whose other side is black lies further from it).
+WIDE_REACH = 1.6
+DARK_WIDE_REACH = 2.1
 
 
 @dataclass(frozen=True)
@@ -397,7 +405,8 @@ def _robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: f
 
 
 def _silhouette(frame: np.ndarray, mask: np.ndarray, planes_gain: float, reference: float,
-                ball: "_Candidate", others: list) -> tuple[float, float, float] | None:
+                ball: "_Candidate", others: list,
+                wide_reach: float = WIDE_REACH) -> tuple[float, float, float] | None:
     """The ball's outline located on the frame itself, to a fraction of a pixel.
 
     Along rays from the centre, the colour edges from just inside the colour mask's circle
@@ -439,7 +448,7 @@ def _silhouette(frame: np.ndarray, mask: np.ndarray, planes_gain: float, referen
         cos, sin = directions[0], directions[1]
         if wide:  # from just inside the circle to well past it
             start = radius - min(EDGE_MARGIN + 0.15 * radius, 0.4 * radius)
-            stop, step = 1.6 * radius + 2, max(RAY_STEP, radius / 60.0)
+            stop, step = wide_reach * radius + 2, max(RAY_STEP, radius / 60.0)
             rounds = ((0.3, 2.0), (0.1, 1.0))
         else:  # a narrow band around the circle found
             band = max(1.5, 0.15 * radius)
@@ -584,6 +593,7 @@ class _Planes:
     gain: float             # that gain
     chroma: np.ndarray      # max - min channel after gain and blur (= S * V / 255), uint8
     reference: float        # the frame's reference level on the ``value`` scale
+    dark: bool = False      # an extremely dark frame (gain >= dark_gain: averaged colour)
 
 
 @dataclass
@@ -668,9 +678,17 @@ class BallDetector:
         # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
         # sub-unit colour information that uint8 rounding would otherwise destroy.
         gained = cv2.convertScaleAbs(image_bgr, alpha=gain) if gain > 1.0 else image_bgr
+        # Extremely dark frames (gain of at least dark_gain): the colour is only a grey level
+        # or two above black, so single pixels' hue and chroma are rounding noise; colour is
+        # classified on wider averages instead (dark_blur_kernel), with its own chroma floor,
+        # and no opening (the averaged mask has no specks, and a small lit cap would not
+        # survive it).
+        dark = cfg.dark_gain > 0 and gain >= cfg.dark_gain
+        kernel = cfg.dark_blur_kernel if dark else cfg.blur_kernel
+        min_chroma = cfg.dark_min_chroma if dark else cfg.min_chroma
         blurred = gained
-        if cfg.blur_kernel > 1:
-            blurred = cv2.GaussianBlur(gained, (cfg.blur_kernel, cfg.blur_kernel), 0)
+        if kernel > 1:
+            blurred = cv2.GaussianBlur(gained, (kernel, kernel), 0)
         hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
         # (three extractChannel calls are several times faster than one cv2.split here)
         hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
@@ -686,14 +704,14 @@ class BallDetector:
         mask &= cv2.inRange(equalised, cfg.v_min, cfg.v_max)
         # chroma (max - min channel) = S * V / 255; raw units are these over the gain
         chroma = cv2.multiply(saturation, value, scale=1.0 / 255.0)
-        if cfg.min_chroma > 0:
-            mask &= cv2.inRange(chroma, min(255, math.ceil(cfg.min_chroma * gain - 0.5)), 255)
-        if self._open_kernel is not None:
+        if min_chroma > 0:
+            mask &= cv2.inRange(chroma, min(255, math.ceil(min_chroma * gain - 0.5)), 255)
+        if self._open_kernel is not None and not dark:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open_kernel)
         if self._close_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
         return _Planes(mask=mask, frame=gained, gain=gain, chroma=chroma,
-                       reference=min(255.0, reference * gain))
+                       reference=min(255.0, reference * gain), dark=dark)
 
     def _equalise(self, value: np.ndarray) -> np.ndarray:
         """CLAHE of the value channel; on a half-size copy for frames wider than 320 px.
@@ -917,10 +935,11 @@ class BallDetector:
         """
         cfg = self.config
         planes = search.planes
+        reach = DARK_WIDE_REACH if planes.dark else WIDE_REACH
         kept: list[_Candidate] = []
         for ball in accepted:
             outline = _silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
-                                  [other for other in accepted if other is not ball])
+                                  [other for other in accepted if other is not ball], reach)
             if outline is not None:
                 ball.x, ball.y, ball.radius = outline
             elif ball.needs_outline:
@@ -939,7 +958,7 @@ class BallDetector:
                 continue
             attempts += 1
             outline = _silhouette(planes.frame, planes.mask, planes.gain, planes.reference,
-                                  candidate, kept)
+                                  candidate, kept, reach)
             if outline is None:
                 continue
             ball = _Candidate(*outline)

@@ -440,3 +440,46 @@ def test_real_tennis_dev_set():
     assert result["recall"] == 1.0, result
     assert result["false_positives_per_image"] <= 0.1, result
     assert set(result["files"]) == set(labels)
+
+
+# ----------------------------------------------------------- extremely dark, no ambient
+def pitch_dark_frame(balls=(), boxes=(), distractor_balls=()):
+    """A render under a 0.01 diffuse light and no ambient: a grey floor at 1, a bright sky
+    band (which does not set the gain), lit colours only 1-2 units above black, unlit sides 0.
+    ``balls``: (u, v, radius) tennis balls lit from above; ``boxes``: (x0, y0, x1, y1, BGR)
+    evenly lit; ``distractor_balls``: (u, v, radius, BGR) lit from above."""
+    image = np.full((480, 640, 3), 1.0, np.float32)
+    image[:120] = (175.0, 165.0, 160.0)
+    for x0, y0, x1, y1, colour in boxes:
+        image = draw_box(image, x0, y0, x1, y1, colour)
+    for u, v, radius, colour in distractor_balls:
+        image = draw_lit_from_above(image, u, v, radius, colour)
+    for u, v, radius in balls:
+        # tennis felt (0.7, 0.85, 0.15 RGB): mostly (1, 1, 0), (1, 2, 0) and some (2, 2, 0)
+        image = draw_lit_from_above(image, u, v, radius, colour=(0.2, 1.9, 1.6))
+    return to_uint8(image)
+
+
+@pytest.mark.parametrize("u, v, radius", [(300.4, 280.7, 17.0), (320.5, 260.2, 18.3),
+                                          (450.2, 330.6, 11.5), (200.6, 300.3, 30.0)])
+def test_a_pitch_dark_ball_is_found_whole(detector, u, v, radius):
+    # The lit cap is 1-2 units above black, its pixels' hues rounding noise: the colour is
+    # judged on averages (dark_gain), and the outline found around the black side.
+    image = pitch_dark_frame(balls=[(u, v, radius)])
+    lit = image[int(v - radius):int(v), int(u - radius):int(u + radius)]
+    assert lit.max() <= 2
+    result = detector.detect(image)
+    assert len(result.detections) == 1, result.detections
+    assert_found(result.detections, u, v, radius, centre_tolerance=1.0, radius_tolerance=0.06)
+
+
+def test_pitch_dark_distractors_give_nothing(detector):
+    # Orange as the simulator renders it at this level: (1, 1, 0) RGB, a yellow hue of chroma
+    # 1, or (2, 1, 0); a dim green cylinder (0, 1, 0); red and blue balls.
+    image = pitch_dark_frame(
+        boxes=[(100, 250, 220, 340, (0.2, 1.2, 1.4)), (400, 240, 470, 300, (0.1, 1.0, 1.8)),
+               (520, 200, 560, 330, (0.2, 1.1, 0.3))],
+        distractor_balls=[(300.0, 300.0, 25.0, (0.3, 1.4, 2.6)), (250.0, 400.0, 20.0, (0.3, 0.3, 2.4)),
+                          (450.0, 400.0, 22.0, (2.5, 0.6, 0.3))])
+    assert image[120:].max() <= 3
+    assert detector.detect(image).detections == []
