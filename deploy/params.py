@@ -57,6 +57,10 @@ MEANINGS = {
         "param2": "Hough: accumulator threshold (lower finds more, and more false, circles)",
         "min_radius": "smallest ball radius (px)",
         "max_radius": "largest ball radius (px); 0 = half the frame's shorter side",
+        "dark_gain": "frame gain at or above which a frame counts as pitch dark (0 = never): "
+                     "colour is then classified on averaged values and the mask is not opened",
+        "dark_blur_kernel": "Gaussian blur (odd px) that averages colour in pitch-dark frames",
+        "dark_min_chroma": "chroma floor (raw units) of a ball pixel in pitch-dark frames",
         "small_radius": "balls smaller than this (px) are kept only when their outline is found "
                         "on the frame; a ball cut by the frame edge must show at least this much rim",
         "blur_kernel": "Gaussian blur kernel (odd px); 1 = no blur",
