@@ -9,7 +9,7 @@ REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$REPO"
 export MUJOCO_GL="${MUJOCO_GL:-egl}"
 status=0
-.venv/bin/python -m pytest -q -p no:cacheprovider -rfE "$@" || status=$?
+.venv/bin/python -m pytest -q -p no:cacheprovider -rfEs "$@" || status=$?
 if [ "$status" -eq 5 ]; then
     echo "test.sh: pytest collected no tests" >&2
 fi
