@@ -70,6 +70,8 @@ class Stats:
         self.received = self.published = self.rejected = self.dropped = 0
         self._durations = collections.deque(maxlen=1000)
         self._lock = threading.Lock()
+        # A service's own figures, added to every snapshot (the Stats schema allows extra fields).
+        self.extra: Callable[[], dict] | None = None
 
     def count(self, field: str, amount: int = 1) -> None:
         with self._lock:
@@ -82,11 +84,12 @@ class Stats:
     def snapshot(self, stamp_ns: int) -> dict:
         with self._lock:
             durations = np.array(self._durations) if self._durations else np.zeros(1)
-            return {"service": self.service, "stamp": int(stamp_ns),
-                    "received": self.received, "published": self.published,
-                    "rejected": self.rejected, "dropped": self.dropped,
-                    "p50_ms": float(np.percentile(durations, 50)),
-                    "p99_ms": float(np.percentile(durations, 99))}
+            figures = {"service": self.service, "stamp": int(stamp_ns),
+                       "received": self.received, "published": self.published,
+                       "rejected": self.rejected, "dropped": self.dropped,
+                       "p50_ms": float(np.percentile(durations, 50)),
+                       "p99_ms": float(np.percentile(durations, 99))}
+        return {**figures, **(self.extra() if self.extra else {})}
 
 
 class Publisher:
@@ -156,6 +159,10 @@ class ServiceContext:
         publisher = Publisher(self, key, message, **options)
         self._declared.append(publisher._publisher)
         return publisher
+
+    def queryable(self, key: str, handler: Callable) -> None:
+        """Answer queries on ``key`` (namespaced) with ``handler(query)`` until shutdown."""
+        self._declared.append(self.session.declare_queryable(self.keys(key), handler))
 
     def reject(self, key: str, reason: str) -> None:
         self.stats.count("rejected")

@@ -94,7 +94,9 @@ def build(service: ServiceContext):
         try:
             request = decode("SimCommand", query.payload.to_bytes() if query.payload else b"")
             with frame_lock:
-                reply = simulation.handle_command(request)
+                # The queryable outlives the loop by a moment at shutdown (the runner undeclares it).
+                reply = ({"ok": False, "error": "the simulator is stopping"} if service.stop.is_set()
+                         else simulation.handle_command(request))
         except MessageError as error:
             reply = {"ok": False, "error": str(error)}
         if reply["ok"]:
@@ -117,15 +119,13 @@ def build(service: ServiceContext):
     service.subscribe(keys.DETECTED_BALLS, "Ball2DArray",
                       lambda balls: gate.answered(balls["header"]["seq"]), count=False)
     service.on_config_change(on_config_change)
-    entities = [
-        service.session.liveliness().declare_subscriber(alive_keys, lambda sample: on_token(
-            sample.key_expr, sample.kind == zenoh.SampleKind.PUT), history=True),
-        service.session.declare_queryable(service.keys(keys.CAMERA_INFO), lambda query: query.reply(
-            query.key_expr, encode("CameraInfo", camera_info()))),
-        service.session.declare_queryable(service.keys(keys.SIM_CONTROL), on_control)]
-    base_snapshot = service.stats.snapshot
-    service.stats.snapshot = lambda stamp: {
-        **base_snapshot(stamp), "real_time_factor": meter.factor(), "frames": simulation.frame_index,
+    service.queryable(keys.CAMERA_INFO, lambda query: query.reply(
+        query.key_expr, encode("CameraInfo", camera_info())))
+    service.queryable(keys.SIM_CONTROL, on_control)
+    tokens = service.session.liveliness().declare_subscriber(alive_keys, lambda sample: on_token(
+        sample.key_expr, sample.kind == zenoh.SampleKind.PUT), history=True)
+    service.stats.extra = lambda: {
+        "real_time_factor": meter.factor(), "frames": simulation.frame_index,
         "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts}
 
     def frame(config: SimulatorConfig, next_info: float) -> float:
@@ -185,9 +185,9 @@ def build(service: ServiceContext):
         finally:
             context.log.info("stopped after %d frames (%.2f s simulated), %d lockstep timeouts",
                              simulation.frame_index, simulation.time, gate.timeouts)
-            for entity in reversed(entities):
-                entity.undeclare()
-            simulation.close()
+            tokens.undeclare()
+            with frame_lock:
+                simulation.close()
             if recorder is not None:
                 recorder.close()
 
