@@ -26,3 +26,26 @@ def session(router):
     opened = client(router.endpoint)
     yield opened
     opened.close()
+
+
+@pytest.fixture
+def launch(router, session, log_dir):
+    """``launch(name, "key=value", ..., wait=True)`` starts ``python -m services.<name>`` with
+    those ``--set`` overrides against the test's router, waits for its liveliness token, and at
+    teardown stops every launched service and checks it exited 0."""
+    from tests.harness import Liveliness, start_service
+
+    started = []
+    liveliness = Liveliness(session)
+
+    def start(name: str, *overrides: str, wait: bool = True):
+        arguments = [item for override in overrides for item in ("--set", override)]
+        process = start_service(name, router.endpoint, log_dir, *arguments)
+        started.append(process)
+        if wait:
+            liveliness.wait(name, timeout=40)
+        return process
+
+    yield start
+    for process in started:
+        assert process.stop() == 0, process.output()

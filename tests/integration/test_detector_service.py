@@ -8,8 +8,7 @@ import zenoh
 from common.images import bgr_to_message
 from common.messages import encode
 from services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import (Collector, Liveliness, draw_ball, floor_image, garbage_payloads,
-                           query_config, start_service)
+from tests.harness import Collector, draw_ball, floor_image, garbage_payloads, query_config
 
 WIDTH, HEIGHT = 640, 480
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
@@ -23,11 +22,8 @@ def frame_with_ball(point, seq, encoding="bgr8"):
 
 
 @pytest.fixture
-def detector(router, session, log_dir):
-    process = start_service("detector", router.endpoint, log_dir)
-    Liveliness(session).wait("detector", timeout=30)
-    yield process
-    assert process.stop() == 0, process.output()
+def detector(launch):
+    return launch("detector")
 
 
 def publish_and_wait(session, collector, payload, seq, timeout=20):

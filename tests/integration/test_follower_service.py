@@ -3,7 +3,7 @@
 import pytest
 
 from common.messages import encode, header
-from tests.harness import Collector, Liveliness, garbage_payloads, query_config, start_service
+from tests.harness import Collector, garbage_payloads, query_config
 
 
 def detection(x, z, seq):
@@ -12,21 +12,9 @@ def detection(x, z, seq):
 
 
 @pytest.fixture
-def start_follower(router, session, log_dir):
-    started = []
-
-    def start(*overrides):
-        # These tests drive the paper's input, detected_ball; target keeping has its own test.
-        overrides = ("keep_target=false",) + overrides
-        arguments = [item for override in overrides for item in ("--set", override)]
-        process = start_service("follower", router.endpoint, log_dir, *arguments)
-        started.append(process)
-        Liveliness(session).wait("follower", timeout=30)
-        return process
-
-    yield start
-    for process in started:
-        assert process.stop() == 0, process.output()
+def start_follower(launch):
+    # These tests drive the paper's input, detected_ball; target keeping has its own test.
+    return lambda *overrides: launch("follower", "keep_target=false", *overrides)
 
 
 def test_chase_arrive_then_search_on_wall_time(session, start_follower):

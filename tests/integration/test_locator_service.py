@@ -6,7 +6,7 @@ import pytest
 
 from common.messages import encode, header
 from services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import Collector, Liveliness, garbage_payloads, query_config, start_service
+from tests.harness import Collector, garbage_payloads, query_config
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, HFOV)
@@ -23,11 +23,8 @@ def ball_message(point, seq, radius=0.033):
 
 
 @pytest.fixture
-def locator(router, session, log_dir):
-    process = start_service("locator", router.endpoint, log_dir)
-    Liveliness(session).wait("locator", timeout=30)
-    yield process
-    assert process.stop() == 0, process.output()
+def locator(launch):
+    return launch("locator")
 
 
 def test_exact_positions_then_live_config_then_clean_exit(session, locator):

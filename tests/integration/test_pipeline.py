@@ -7,7 +7,7 @@ import pytest
 from common.images import bgr_to_message
 from common.messages import encode, header
 from services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import Collector, Liveliness, draw_ball, floor_image, start_service
+from tests.harness import Collector, draw_ball, floor_image
 
 WIDTH, HEIGHT = 640, 480
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
@@ -19,18 +19,10 @@ POINTS = [(0.0, 0.067, 0.4), (0.25, 0.067, 1.0), (-0.6, 0.067, 2.0), (0.5, 0.067
 
 
 @pytest.fixture
-def pipeline(router, session, log_dir):
+def pipeline(launch):
     # The ball jumps between frames here, so the follower steers by the largest ball as the
     # paper's does (keep_target would rightly ignore a far jump for target_hold_secs).
-    processes = [start_service("detector", router.endpoint, log_dir),
-                 start_service("locator", router.endpoint, log_dir),
-                 start_service("follower", router.endpoint, log_dir, "--set", "keep_target=false")]
-    liveliness = Liveliness(session)
-    for name in ("detector", "locator", "follower"):
-        liveliness.wait(name, timeout=40)
-    yield processes
-    for process in processes:
-        assert process.stop() == 0, process.output()
+    return [launch("detector"), launch("locator"), launch("follower", "keep_target=false")]
 
 
 def test_frames_to_positions_and_commands(session, pipeline):

@@ -49,20 +49,8 @@ def moved(before: dict, after: dict) -> float:
 
 
 @pytest.fixture
-def start_simulator(router, session, log_dir):
-    started = []
-
-    def start(*overrides, wait=True):
-        arguments = [item for override in overrides for item in ("--set", override)]
-        process = start_service("simulator", router.endpoint, log_dir, *arguments)
-        started.append(process)
-        if wait:
-            Liveliness(session).wait("simulator", timeout=30)
-        return process
-
-    yield start
-    for process in started:
-        assert process.stop() == 0, process.output()
+def start_simulator(launch):
+    return lambda *overrides, wait=True: launch("simulator", *overrides, wait=wait)
 
 
 def test_frames_camera_info_and_ground_truth_agree(session, start_simulator):
