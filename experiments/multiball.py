@@ -26,7 +26,7 @@ import numpy as np
 
 from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress
 from experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception,
-                             point_from_camera, scenario_data)
+                             point_from_camera, scenario_data, segment_across)
 from experiments.tracking import FOLLOWER_SETTINGS
 from services.simulator.scenario import load_scenario
 
@@ -44,9 +44,7 @@ def random_layout(rng, index: int) -> dict:
         middle = point_from_camera(robot_x, robot_y, yaw, rng.uniform(0.5, 2.5),
                                    math.radians(rng.uniform(-10, 10)))
         across = yaw + math.pi / 2 + math.radians(rng.uniform(-25, 25))
-        half = rng.uniform(1.0, 1.5)
-        line_start = (middle[0] - half * math.cos(across), middle[1] - half * math.sin(across))
-        line_end = (middle[0] + half * math.cos(across), middle[1] + half * math.sin(across))
+        line_start, line_end = segment_across(middle, across, rng.uniform(1.0, 1.5))
         centre = point_from_camera(robot_x, robot_y, yaw, rng.uniform(1.5, 2.5),
                                    math.radians(rng.uniform(-15, 15)))
         radius = rng.uniform(0.5, 1.0)

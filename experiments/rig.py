@@ -119,6 +119,14 @@ def point_from_camera(robot_x: float, robot_y: float, yaw: float, distance: floa
             camera_y + distance * math.sin(yaw + bearing))
 
 
+def segment_across(middle: tuple[float, float], heading: float,
+                   half_length: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ends of a straight path of ``2 * half_length`` through ``middle`` along ``heading``
+    (world radians): the line a scripted ball moves on."""
+    dx, dy = half_length * math.cos(heading), half_length * math.sin(heading)
+    return (middle[0] - dx, middle[1] - dy), (middle[0] + dx, middle[1] + dy)
+
+
 # ---------------------------------------------------------------------------------------------
 # Perception
 

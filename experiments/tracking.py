@@ -35,7 +35,7 @@ import numpy as np
 
 from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
 from experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception, build_scenario,
-                             heading_error, point_from_camera, scenario_data)
+                             heading_error, point_from_camera, scenario_data, segment_across)
 from services.simulator.config import SimulatorConfig
 from services.simulator.scenario import load_scenario
 from services.simulator.sim import Simulation
@@ -137,9 +137,7 @@ def _random_scenario(rng, category: str, index: int) -> dict[str, Any]:
             middle = point_from_camera(robot_x, robot_y, yaw, rng.uniform(1.0, 1.8),
                                        math.radians(rng.uniform(-15, 15)))
             across = yaw + math.pi / 2 + math.radians(rng.uniform(-30, 30))
-            half = rng.uniform(0.4, 0.75)
-            start = (middle[0] - half * math.cos(across), middle[1] - half * math.sin(across))
-            end = (middle[0] + half * math.cos(across), middle[1] + half * math.sin(across))
+            start, end = segment_across(middle, across, rng.uniform(0.4, 0.75))
             # Start at the middle, moving toward one end: the ball is in view at the start.
             ball["motion"] = {"type": "line", "end": [round(end[0], 3), round(end[1], 3)],
                               "speed": BALL_SPEED}
