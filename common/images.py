@@ -9,7 +9,7 @@ import struct
 import cv2
 import numpy as np
 
-from common.messages import MAX_IMAGE_SIDE, MessageError, header as make_header
+from balltrack.common.messages import MAX_IMAGE_SIDE, MessageError, header as make_header
 
 _SOF_MARKERS = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 

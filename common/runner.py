@@ -29,12 +29,12 @@ from typing import Any, Callable
 import numpy as np
 import zenoh
 
-from common import keys as key_table
-from common.clock import SimClock, TimerTicks, WallClock
-from common.config import ConfigError, config_to_dict, load_config, replace_config
-from common.keys import Keys
-from common.messages import MessageError, decode, encode
-from common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
+from balltrack.common import keys as key_table
+from balltrack.common.clock import SimClock, TimerTicks, WallClock
+from balltrack.common.config import ConfigError, config_to_dict, load_config, replace_config
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode, encode
+from balltrack.common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
@@ -280,7 +280,7 @@ def _serve_config(context: ServiceContext, query) -> None:
 
 
 def build_parser(name: str, description: str | None) -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog=f"python -m services.{name}", description=description,
+    parser = ArgumentParser(prog=f"balltrack run {name}", description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_session_arguments(parser)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])

@@ -2,8 +2,8 @@
 
 import threading
 
-from common.keys import Keys
-from common.messages import MessageError, decode
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode
 
 
 def service_status(session, namespace: str = "", timeout: float = 3.0,

@@ -24,10 +24,10 @@ import threading
 import time
 from pathlib import Path
 
-from common.keys import SERVICES, Keys
-from common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints, open_session
-from common.status import service_status
-from deploy.supervisor import (REPO, ChildSpec, SupervisorSettings, child_environment, describe_exit,
+from balltrack.common.keys import SERVICES, Keys
+from balltrack.common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints, open_session
+from balltrack.common.status import service_status
+from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
                                die_with_parent, pid_alive, save_launch, supervise)
 
 DEFAULT_RUN_DIR = "runs/default"
@@ -85,7 +85,7 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
     specs: list[ChildSpec] = []
     listen = args.listen or [DEFAULT_LISTEN]
     if args.router:
-        argv = [python, "-m", "common.cli", "router"]
+        argv = [python, "-m", "balltrack", "router"]
         for endpoint in listen:
             argv += ["--listen", endpoint]
         for endpoint in args.router_connect:
@@ -111,7 +111,7 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
     if config_dir is not None and not config_dir.is_dir():
         raise LaunchError(f"--config-dir: {args.config_dir} is not a directory")
     for name in services:
-        argv = [python, "-m", f"services.{name}"]
+        argv = [python, "-m", f"balltrack.services.{name}"]
         for endpoint in connect:
             argv += ["--connect", endpoint]
         if args.namespace:
@@ -238,9 +238,9 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
     (run_dir / "status.json").unlink(missing_ok=True)
     save_launch(run_dir, specs, {**info, "run_dir": str(run_dir)})
     with open(run_dir / "supervisor.log", "ab") as log:
-        popen = subprocess.Popen([sys.executable, "-m", "deploy", "supervise", "--run-dir", str(run_dir)],
+        popen = subprocess.Popen([sys.executable, "-m", "balltrack.deploy", "supervise", "--run-dir", str(run_dir)],
                                  stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                 cwd=REPO, env=child_environment(), start_new_session=True,
+                                 env=child_environment(), start_new_session=True,
                                  preexec_fn=die_with_parent if tie_to_parent else None)
     launched = Launched(run_dir, popen)
 

@@ -33,19 +33,20 @@ import socket
 import sys
 import threading
 import time
+from importlib import resources
 from pathlib import Path
 
 import msgpack
 import numpy as np
 
-from common import keys as key_table
-from common.keys import Keys
-from common.messages import MessageError, decode
-from common.session import ArgumentParser, open_session
-from deploy.cli import LaunchError, launch, parse_service_overrides
-from deploy.supervisor import REPO, ChildSpec
+from balltrack.common import keys as key_table
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode
+from balltrack.common.session import ArgumentParser, open_session
+from balltrack.deploy.cli import LaunchError, launch, parse_service_overrides
+from balltrack.deploy.supervisor import ChildSpec
 
-DEMO_CONFIG = REPO / "deploy" / "config" / "demo"
+DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
 # Children in start order: the simulator last, so the pipeline is ready for its first frame.
 DEMO_SERVICES = ("detector", "locator", "follower", "simulator")
 # Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
@@ -138,7 +139,7 @@ class VideoWriter(threading.Thread):
     def run(self) -> None:
         import cv2
 
-        from common.images import image_to_bgr
+        from balltrack.common.images import image_to_bgr
 
         while True:
             message = self.frames.get()
@@ -327,9 +328,9 @@ def run(args) -> int:
     config_dir = Path(args.config_dir).resolve()
     overrides = parse_service_overrides(args.overrides, list(DEMO_SERVICES))
     python = sys.executable
-    specs = [ChildSpec("router", [python, "-m", "common.cli", "router", "--listen", endpoint], port=port)]
+    specs = [ChildSpec("router", [python, "-m", "balltrack", "router", "--listen", endpoint], port=port)]
     for name in DEMO_SERVICES:
-        argv = [python, "-m", f"services.{name}", "--connect", endpoint]
+        argv = [python, "-m", f"balltrack.services.{name}", "--connect", endpoint]
         if args.namespace:
             argv += ["--namespace", args.namespace]
         if (config_dir / f"{name}.toml").is_file():
@@ -376,7 +377,7 @@ def run(args) -> int:
             if not stop.is_set():
                 print("demo: the pipeline produced no detected_balls in time", file=sys.stderr)
             return 1
-        from services.simulator.control import send_command
+        from balltrack.services.simulator.control import send_command
 
         reply = send_command(session, {"op": "reset"}, args.namespace)
         if not reply["ok"]:
@@ -462,7 +463,7 @@ def summarise(args, observer: Observer, goal: Goal, reached: bool, final_t: floa
 def write_outputs(run_dir: Path, observer: Observer | None, video: VideoWriter | None, result: dict) -> None:
     files = {}
     if observer is not None and (observer.truths or observer.estimates):
-        from deploy.figures import plot_trajectory, plot_velocity
+        from balltrack.deploy.figures import plot_trajectory, plot_velocity
 
         with observer.lock:
             estimates, truths, commands = list(observer.estimates), list(observer.truths), list(observer.commands)

@@ -39,7 +39,6 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
 LOG = logging.getLogger("supervisor")
 
 # Child states, as written to status.json.
@@ -97,9 +96,6 @@ def child_environment(extra: dict[str, str] | None = None) -> dict[str, str]:
     environment = dict(os.environ)
     environment.setdefault("MUJOCO_GL", "egl")
     environment["PYTHONUNBUFFERED"] = "1"
-    # The repository on the path, so children run even without the editable install.
-    environment["PYTHONPATH"] = os.pathsep.join(
-        [str(REPO)] + [item for item in environment.get("PYTHONPATH", "").split(os.pathsep) if item])
     environment.update(extra or {})
     return environment
 
@@ -153,7 +149,7 @@ class Child:
         self._log_handle.flush()
         self.popen = subprocess.Popen(
             self.spec.argv, stdout=self._log_handle, stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL, cwd=REPO, env=child_environment(self.spec.env),
+            stdin=subprocess.DEVNULL, env=child_environment(self.spec.env),
             start_new_session=True, preexec_fn=die_with_parent if sys.platform == "linux" else None)
         self.pid_path.write_text(f"{self.popen.pid}\n")
         self.started_at = time.monotonic()

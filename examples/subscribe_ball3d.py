@@ -38,7 +38,7 @@ def main() -> int:
     args = parser.parse_args()
 
     if args.validate:
-        from common.messages import decode
+        from balltrack.common.messages import decode
 
         def read(payload: bytes) -> dict:
             return decode("Ball3D", payload)  # raises common.messages.MessageError (a ValueError)

@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
-from experiments.rig import (CAMERA_AHEAD, CAMERA_HEIGHT, TENNIS_RADIUS, TENNIS_RGB, Perception,
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
+from balltrack.experiments.rig import (CAMERA_AHEAD, CAMERA_HEIGHT, TENNIS_RADIUS, TENNIS_RGB, Perception,
                              position_errors, scenario_data)
 
 NAME = "accuracy"
@@ -169,6 +169,6 @@ def _plots(result: ExperimentResult, detected: list[dict], size: tuple[int, int]
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

@@ -57,15 +57,15 @@ class Options:
 
     def detector_config(self):
         """The detector parameters every experiment uses: defaults plus ``--detector``."""
-        from common.config import load_config
-        from services.detector.config import DetectorConfig
+        from balltrack.common.config import load_config
+        from balltrack.services.detector.config import DetectorConfig
 
         return load_config(DetectorConfig, None, self.detector_overrides)
 
     def follower_config(self, **experiment_settings):
         """Follower parameters: defaults, then the experiment's own, then ``--follower``."""
-        from common.config import load_config, parse_overrides
-        from services.follower.config import FollowerConfig
+        from balltrack.common.config import load_config, parse_overrides
+        from balltrack.services.follower.config import FollowerConfig
 
         overrides = [f"{key}={value}" for key, value in experiment_settings.items()]
         command_line = parse_overrides(self.follower_overrides)

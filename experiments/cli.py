@@ -23,8 +23,8 @@ import sys
 import traceback
 from pathlib import Path
 
-from common.session import ArgumentParser
-from experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
+from balltrack.common.session import ArgumentParser
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
                "distractors", "real_photos")
@@ -32,7 +32,7 @@ TRANSPORTS = ("auto", "in-process", "zenoh")
 
 
 def experiment_module(name: str):
-    return importlib.import_module(f"experiments.{name}")
+    return importlib.import_module(f"balltrack.experiments.{name}")
 
 
 def build_parser() -> ArgumentParser:

@@ -16,12 +16,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from services.detector.pipeline import BallDetector
+from balltrack.services.detector.pipeline import BallDetector
 
 
 def simulator_frames(count: int) -> list[np.ndarray]:
-    from services.simulator.config import SimulatorConfig
-    from services.simulator.sim import Simulation
+    from balltrack.services.simulator.config import SimulatorConfig
+    from balltrack.services.simulator.sim import Simulation
 
     frames = []
     for scenario in ("chase", "multi", "distractors"):

@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, progress
-from experiments.rig import Perception, draw_detections, scenario_data
-from services.simulator.scenario import load_scenario
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, progress
+from balltrack.experiments.rig import Perception, draw_detections, scenario_data
+from balltrack.services.simulator.scenario import load_scenario
 
 NAME = "distractors"
 TITLE = "False detections in scenes without a tennis ball"
@@ -143,6 +143,6 @@ def _colour_name(rgb) -> str:
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
-from experiments.rig import TENNIS_RADIUS, TENNIS_RGB, Perception, position_errors, scenario_data
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
+from balltrack.experiments.rig import TENNIS_RADIUS, TENNIS_RGB, Perception, position_errors, scenario_data
 
 NAME = "illumination"
 TITLE = "Detection under varying illumination (paper Table 1)"
@@ -166,6 +166,6 @@ def _plots(result: ExperimentResult, rows: dict, montage: dict, options: Options
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

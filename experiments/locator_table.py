@@ -19,7 +19,7 @@ import argparse
 
 import numpy as np
 
-from services.locator.geometry import (CIRCLE_MODELS, Intrinsics, faithful_v_fov, locate_exact,
+from balltrack.services.locator.geometry import (CIRCLE_MODELS, Intrinsics, faithful_v_fov, locate_exact,
                                        locate_faithful, project_sphere)
 
 WIDTH, HEIGHT = 640, 480

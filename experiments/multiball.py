@@ -24,11 +24,11 @@ import math
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress
-from experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception,
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, percent, progress
+from balltrack.experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception,
                              point_from_camera, scenario_data, segment_across)
-from experiments.tracking import FOLLOWER_SETTINGS
-from services.simulator.scenario import load_scenario
+from balltrack.experiments.tracking import FOLLOWER_SETTINGS
+from balltrack.services.simulator.scenario import load_scenario
 
 NAME = "multiball"
 TITLE = "Several balls: recall of visible balls and target keeping (paper contribution 3)"
@@ -190,6 +190,6 @@ def _run_layout(layout, frames: int, follower, detector, bar) -> dict:
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

@@ -30,9 +30,9 @@ from pathlib import Path
 
 import cv2
 
-from common.config import ConfigError, load_config
-from services.detector.config import DetectorConfig
-from services.detector.pipeline import BallDetector
+from balltrack.common.config import ConfigError, load_config
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.pipeline import BallDetector
 
 MIN_BALL_PX = 20
 NAME = "real_photos"
@@ -99,7 +99,7 @@ def score_folder(folder, config: DetectorConfig | None = None) -> dict:
 
 def run(options) -> "ExperimentResult":
     """The ``balltrack experiment real_photos`` entry point (skipped without ``--photos``)."""
-    from experiments.base import ExperimentResult, Stopwatch, percent, progress
+    from balltrack.experiments.base import ExperimentResult, Stopwatch, percent, progress
 
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="offline", quick=options.quick)

@@ -20,16 +20,16 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.detector.config import DetectorConfig
-from services.detector.pipeline import BallDetector, Detection
-from services.follower.config import FollowerConfig
-from services.follower.controller import Command, FollowerController
-from services.locator.geometry import (Intrinsics, Position3D, locate_exact, locate_faithful,
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.pipeline import BallDetector, Detection
+from balltrack.services.follower.config import FollowerConfig
+from balltrack.services.follower.controller import Command, FollowerController
+from balltrack.services.locator.geometry import (Intrinsics, Position3D, locate_exact, locate_faithful,
                                        project_sphere, silhouette_ellipse)
-from services.simulator.config import SimulatorConfig
-from services.simulator.scenario import Scenario, parse_scenario
-from services.simulator.sim import Simulation
-from services.simulator.world import CAMERA_POSITION
+from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.scenario import Scenario, parse_scenario
+from balltrack.services.simulator.sim import Simulation
+from balltrack.services.simulator.world import CAMERA_POSITION
 
 CAMERA_AHEAD = CAMERA_POSITION[0]   # camera in front of the robot's centre (m)
 CAMERA_HEIGHT = CAMERA_POSITION[2]  # camera above the floor (m)

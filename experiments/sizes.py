@@ -14,8 +14,8 @@ import math
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
-from experiments.rig import TENNIS_RGB, Perception, position_errors, scenario_data
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
+from balltrack.experiments.rig import TENNIS_RGB, Perception, position_errors, scenario_data
 
 NAME = "sizes"
 TITLE = "Ball sizes: detection and distance error per radius"
@@ -119,6 +119,6 @@ def _plot(result: ExperimentResult, rows: dict, options: Options) -> None:
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

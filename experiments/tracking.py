@@ -33,12 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
-from experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception, build_scenario,
+from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, percent, progress, quantile
+from balltrack.experiments.rig import (TENNIS_RADIUS, TENNIS_RGB, ClosedLoop, Perception, build_scenario,
                              heading_error, point_from_camera, scenario_data, segment_across)
-from services.simulator.config import SimulatorConfig
-from services.simulator.scenario import load_scenario
-from services.simulator.sim import Simulation
+from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.scenario import load_scenario
+from balltrack.services.simulator.sim import Simulation
 
 NAME = "tracking"
 TITLE = "Closed-loop tracking from randomised starts (paper 3.4-3.5, figs 6-8)"
@@ -241,7 +241,7 @@ def run(options: Options) -> ExperimentResult:
     transport, why = _choose_transport(options)
     if transport == "zenoh":
         try:
-            from experiments.zenoh_loop import ZenohLoop
+            from balltrack.experiments.zenoh_loop import ZenohLoop
 
             with ZenohLoop(options.out, follower, detector) as zenoh_loop:
                 with progress(total=len(runs) + 1, desc=NAME, options=options, unit="run") as bar:
@@ -287,7 +287,7 @@ def _choose_transport(options: Options) -> tuple[str, str]:
     try:
         import importlib.util
 
-        if importlib.util.find_spec("services.simulator.service") is None:
+        if importlib.util.find_spec("balltrack.services.simulator.service") is None:
             return "in-process", "The simulator service is not available, so the in-process loop ran."
     except ImportError:
         return "in-process", "The simulator service is not available, so the in-process loop ran."
@@ -431,6 +431,6 @@ def _plots(result: ExperimentResult, example: Outcome, options: Options) -> None
 if __name__ == "__main__":
     import sys
 
-    from experiments.cli import main
+    from balltrack.experiments.cli import main
 
     sys.exit(main([NAME, *sys.argv[1:]]))

@@ -29,12 +29,11 @@ from typing import Any
 
 import msgpack
 
-from common import keys
-from experiments.rig import scenario_data, write_scenario
-from services.detector.config import DetectorConfig
-from services.follower.config import FollowerConfig
+from balltrack.common import keys
+from balltrack.experiments.rig import scenario_data, write_scenario
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.follower.config import FollowerConfig
 
-REPO = Path(__file__).resolve().parents[1]
 STARTUP_TIMEOUT = 90.0
 STALL_TIMEOUT = 20.0
 SETTLE_SECONDS = 1.2
@@ -72,11 +71,10 @@ class _Process:
         self._log = open(self.log_path, "wb")
         environment = dict(os.environ)
         environment.setdefault("MUJOCO_GL", "egl")
-        environment["PYTHONPATH"] = str(REPO) + os.pathsep + environment.get("PYTHONPATH", "")
         environment["PYTHONUNBUFFERED"] = "1"
         self.popen = subprocess.Popen([sys.executable, *arguments], stdout=self._log,
                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                      env=environment, cwd=REPO)
+                                      env=environment)
 
     def tail(self, lines: int = 8) -> str:
         text = self.log_path.read_text(errors="replace").strip().splitlines()
@@ -130,11 +128,11 @@ class ZenohLoop:
         self.close()
 
     def _start(self) -> None:
-        from common.session import open_session
+        from balltrack.common.session import open_session
 
         port = _free_port()
         endpoint = f"tcp/127.0.0.1:{port}"
-        router = _Process("router", ["-m", "common.cli", "router", "--listen", endpoint], self.folder)
+        router = _Process("router", ["-m", "balltrack", "router", "--listen", endpoint], self.folder)
         self.processes.append(router)
         self._wait_for_log(router, "listening on", 30)
         self.blank = write_scenario(scenario_data(name="blank", description="no ball"),
@@ -217,7 +215,7 @@ class ZenohLoop:
     # -- runs -----------------------------------------------------------------------------------
 
     def _command(self, request: dict) -> None:
-        from services.simulator.control import send_command
+        from balltrack.services.simulator.control import send_command
 
         reply = send_command(self.session, request, timeout=10.0)
         if not reply.get("ok"):
@@ -241,7 +239,7 @@ class ZenohLoop:
 
     def run(self, spec, record: bool = False):
         """One run of ``spec`` (a tracking.RunSpec); returns a tracking.Outcome."""
-        from experiments.tracking import Judge, Outcome, _append_trace, _new_trace
+        from balltrack.experiments.tracking import Judge, Outcome, _append_trace, _new_trace
 
         self._run_count += 1
         # 1. No ball until the follower has timed out.

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import zenoh
 
-from common.keys import Keys
-from common.messages import decode, encode
-from common.session import open_session
+from balltrack.common.keys import Keys
+from balltrack.common.messages import decode, encode
+from balltrack.common.session import open_session
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -32,7 +32,6 @@ def free_port() -> int:
 def process_environment() -> dict:
     environment = dict(os.environ)
     environment.setdefault("MUJOCO_GL", "egl")
-    environment["PYTHONPATH"] = str(REPO) + os.pathsep + environment.get("PYTHONPATH", "")
     environment["PYTHONUNBUFFERED"] = "1"
     # A process that hangs on SIGTERM gets SIGABRT from Process.stop: dump its threads' stacks.
     environment["PYTHONFAULTHANDLER"] = "1"
@@ -90,7 +89,7 @@ class Router:
     def __init__(self, log_dir: Path, port: int | None = None):
         self.port = port or free_port()
         self.endpoint = f"tcp/127.0.0.1:{self.port}"
-        self.process = Process([sys.executable, "-m", "common.cli", "router", "--listen",
+        self.process = Process([sys.executable, "-m", "balltrack", "router", "--listen",
                                 self.endpoint], log_dir / f"router-{self.port}.log")
         self.process.wait_for_output("listening on", 20)
 
@@ -99,7 +98,7 @@ class Router:
 
 
 def start_service(name: str, endpoint: str, log_dir: Path, *extra: str) -> Process:
-    return Process([sys.executable, "-m", f"services.{name}", "--connect", endpoint, *extra],
+    return Process([sys.executable, "-m", f"balltrack.services.{name}", "--connect", endpoint, *extra],
                    log_dir / f"{name}-{time.monotonic_ns()}.log")
 
 

@@ -3,7 +3,7 @@
     available, reason = netns_available()
     with NetworkNamespaces(("a", "b", "c")) as network:
         network.address("a")                  # "10.213.0.1"
-        network.command("b", [python, "-m", "services.locator", ...])  # argv for Popen
+        network.command("b", [python, "-m", "balltrack.services.locator", ...])  # argv for Popen
         port = network.free_port("a")
 
 The layout is a switch: a fourth namespace ``<base>-net`` holds a Linux bridge, and each host

@@ -1,5 +1,5 @@
 import sys
 
-from services.detector.service import main
+from balltrack.services.detector.service import main
 
 sys.exit(main())

@@ -14,7 +14,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from common.config import ConfigError
+from balltrack.common.config import ConfigError
 
 
 def _check_range(name: str, value: float, low: float, high: float) -> None:

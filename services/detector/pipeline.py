@@ -45,8 +45,8 @@ No zenoh here: arrays in, dataclasses out.
 Example::
 
     import cv2
-    from services.detector.config import DetectorConfig
-    from services.detector.pipeline import BallDetector, annotate
+    from balltrack.services.detector.config import DetectorConfig
+    from balltrack.services.detector.pipeline import BallDetector, annotate
 
     detector = BallDetector(DetectorConfig())
     image = cv2.imread("frame.jpg")
@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from services.detector.config import DetectorConfig
+from balltrack.services.detector.config import DetectorConfig
 
 # Hough circles per mask blob: beyond the strongest few they are duplicates or clutter.
 HOUGH_CIRCLES_PER_BLOB = 4

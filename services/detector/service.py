@@ -11,11 +11,11 @@ Example:
     python -m services.detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
 """
 
-from common import keys
-from common.images import bgr_to_message, image_to_bgr
-from common.runner import ServiceContext, run_service
-from services.detector.config import DetectorConfig
-from services.detector.pipeline import BallDetector, annotate
+from balltrack.common import keys
+from balltrack.common.images import bgr_to_message, image_to_bgr
+from balltrack.common.runner import ServiceContext, run_service
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.pipeline import BallDetector, annotate
 
 
 def ball_fields(detection, width: int, height: int) -> dict:

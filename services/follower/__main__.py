@@ -1,5 +1,5 @@
 import sys
 
-from services.follower.service import main
+from balltrack.services.follower.service import main
 
 sys.exit(main())

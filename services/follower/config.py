@@ -3,7 +3,7 @@
 import math
 from dataclasses import dataclass
 
-from common.config import ConfigError
+from balltrack.common.config import ConfigError
 
 
 def _number(name: str, value) -> float:

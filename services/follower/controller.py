@@ -42,7 +42,7 @@ Decisions beyond the original node:
 import math
 from dataclasses import dataclass
 
-from services.follower.config import FollowerConfig
+from balltrack.services.follower.config import FollowerConfig
 
 CHASE = "chase"
 ARRIVED = "arrived"

@@ -13,11 +13,11 @@ Example:
 
 import threading
 
-from common import keys
-from common.messages import MessageError
-from common.runner import ServiceContext, run_service
-from services.follower.config import FollowerConfig
-from services.follower.controller import SEARCH, FollowerController
+from balltrack.common import keys
+from balltrack.common.messages import MessageError
+from balltrack.common.runner import ServiceContext, run_service
+from balltrack.services.follower.config import FollowerConfig
+from balltrack.services.follower.controller import SEARCH, FollowerController
 
 
 def build(service: ServiceContext):

@@ -1,5 +1,5 @@
 import sys
 
-from services.locator.service import main
+from balltrack.services.locator.service import main
 
 sys.exit(main())

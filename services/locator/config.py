@@ -3,9 +3,9 @@
 import math
 from dataclasses import dataclass
 
-from common.config import ConfigError
+from balltrack.common.config import ConfigError
 
-from services.locator.geometry import CIRCLE_MODELS
+from balltrack.services.locator.geometry import CIRCLE_MODELS
 
 LOCATOR_MODES = ("auto", "exact", "faithful")
 

@@ -1,5 +1,5 @@
 import sys
 
-from services.simulator.service import main
+from balltrack.services.simulator.service import main
 
 sys.exit(main())

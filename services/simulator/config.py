@@ -11,7 +11,7 @@ Example ``simulator.toml``::
 import math
 from dataclasses import dataclass
 
-from common.config import ConfigError
+from balltrack.common.config import ConfigError
 
 PACING_MODES = ("realtime", "fast", "lockstep")
 ENCODINGS = ("rgb8", "bgr8", "jpeg")

@@ -2,8 +2,8 @@
 
 Example::
 
-    from common.session import open_session
-    from services.simulator.control import send_command
+    from balltrack.common.session import open_session
+    from balltrack.services.simulator.control import send_command
 
     session = open_session(["tcp/127.0.0.1:7447"])
     send_command(session, {"op": "place_ball", "id": "tennis", "position": [1.5, 0.2]})
@@ -12,9 +12,9 @@ Example::
 
 import msgpack
 
-from common import keys
-from common.keys import Keys
-from common.messages import MessageError, decode
+from balltrack.common import keys
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode
 
 
 def send_command(session, request: dict | bytes, namespace: str = "", timeout: float = 5.0) -> dict:

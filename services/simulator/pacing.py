@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Callable
 
-from common.clock import TimerTicks
+from balltrack.common.clock import TimerTicks
 
 
 class RealtimePacer:

@@ -52,12 +52,13 @@ A problem (missing file, bad TOML, unknown key, wrong type, out-of-range value) 
 import math
 import tomllib
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from common.config import ConfigError
+from balltrack.common.config import ConfigError
 
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIO_DIR = Path(str(resources.files("balltrack.services.simulator") / "scenarios"))
 TENNIS_RGB = (0.7, 0.85, 0.15)
 TENNIS_RADIUS = 0.033
 DEFAULT_DIFFUSE = 0.8

@@ -30,13 +30,13 @@ import time
 import cv2
 import zenoh
 
-from common import keys
-from common.images import bgr_to_message
-from common.messages import MessageError, decode, encode, header
-from common.runner import ServiceContext, run_service
-from services.simulator.config import SimulatorConfig
-from services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
-from services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
+from balltrack.common import keys
+from balltrack.common.images import bgr_to_message
+from balltrack.common.messages import MessageError, decode, encode, header
+from balltrack.common.runner import ServiceContext, run_service
+from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
 
 LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
                  "encoding", "jpeg_quality", "publish_images"}

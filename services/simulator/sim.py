@@ -42,10 +42,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 import numpy as np  # noqa: E402
 
-from common.config import ConfigError  # noqa: E402
-from services.simulator.config import SimulatorConfig  # noqa: E402
-from services.simulator.scenario import Scenario, load_scenario  # noqa: E402
-from services.simulator.world import (  # noqa: E402
+from balltrack.common.config import ConfigError  # noqa: E402
+from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
+from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
+from balltrack.services.simulator.world import (  # noqa: E402
     CAMERA_NAME,
     LIGHT_NAME,
     ROBOT_JOINTS,
@@ -605,7 +605,7 @@ def benchmark(config: SimulatorConfig, frames: int = 150) -> dict[str, float]:
 if __name__ == "__main__":
     import argparse
 
-    from common.config import load_config
+    from balltrack.common.config import load_config
 
     parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
                                                  "python -m services.simulator.sim --frames 150")

@@ -22,8 +22,8 @@ Design choices, and why:
 import math
 from xml.sax.saxutils import quoteattr
 
-from services.simulator.config import SimulatorConfig
-from services.simulator.scenario import Scenario
+from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.scenario import Scenario
 
 CAMERA_NAME = "front"
 # Views for people (demo pictures, videos): behind the robot following it, and the whole world

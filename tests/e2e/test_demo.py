@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 def test_demo_reaches_the_ball_and_writes_its_outputs(tmp_path):
     run_dir = tmp_path / "demo"
     # A generous limit: the chase takes ~18 s of simulated time, slower on a busy machine.
-    result = subprocess.run([sys.executable, "-m", "deploy.demo", "--run-dir", str(run_dir),
+    result = subprocess.run([sys.executable, "-m", "balltrack.deploy.demo", "--run-dir", str(run_dir),
                              "--port", str(free_port()), "--time-limit", "150"],
                             cwd=REPO, env=process_environment(), capture_output=True, text=True,
                             timeout=280)

@@ -30,8 +30,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.messages import decode
-from services.simulator.control import send_command
+from balltrack.common.messages import decode
+from balltrack.services.simulator.control import send_command
 from tests.harness import REPO, Liveliness, Router, client, process_environment, query_config, start_service
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
@@ -411,7 +411,7 @@ def test_robot_finds_and_reaches_the_ball_in_search(shared_router, tmp_path):
 
 # -- under the deploy supervisor: a killed locator, a restarted router -----------------------------
 def deploy(*arguments: str, timeout: float = 150.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "deploy", *arguments], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "balltrack.deploy", *arguments], cwd=REPO,
                           env=process_environment(), capture_output=True, text=True, timeout=timeout)
 
 

@@ -8,14 +8,14 @@ import time
 import cv2
 import pytest
 
-from common.messages import encode
+from balltrack.common.messages import encode
 from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, draw_ball, floor_image,
                            process_environment, start_service)
 from tests.integration.test_pipeline import CAMERA_INFO
 
 
 def balltrack(*arguments, timeout=60):
-    return subprocess.run([sys.executable, "-m", "common.cli", *arguments], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "balltrack", *arguments], capture_output=True,
                           text=True, timeout=timeout, cwd=REPO, env=process_environment())
 
 
@@ -86,9 +86,9 @@ def test_status_config_echo_hz(router, session, log_dir):
     refused = balltrack("config", "locator", "ball_radius=-2", "--connect", router.endpoint)
     assert refused.returncode == 2 and "ball_radius" in refused.stderr
 
-    echo = Process([sys.executable, "-m", "common.cli", "echo", "camera/camera_info", "--count",
+    echo = Process([sys.executable, "-m", "balltrack", "echo", "camera/camera_info", "--count",
                     "2", "--connect", router.endpoint], log_dir / "echo.log")
-    hz = Process([sys.executable, "-m", "common.cli", "hz", "camera/camera_info", "--window", "1",
+    hz = Process([sys.executable, "-m", "balltrack", "hz", "camera/camera_info", "--window", "1",
                   "--count", "2", "--connect", router.endpoint], log_dir / "hz.log")
     # Publish until both tools have what they need (they subscribe asynchronously).
     deadline = time.monotonic() + 30

@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from common.messages import encode, header
+from balltrack.common.messages import encode, header
 from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment
 
 SERVICES = ["detector", "locator", "follower"]
 
 
 def deploy(*arguments: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "deploy", *arguments], cwd=REPO, env=process_environment(),
+    return subprocess.run([sys.executable, "-m", "balltrack.deploy", *arguments], cwd=REPO, env=process_environment(),
                           capture_output=True, text=True, timeout=timeout)
 
 

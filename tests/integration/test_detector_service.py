@@ -5,9 +5,9 @@ import math
 import pytest
 import zenoh
 
-from common.images import bgr_to_message
-from common.messages import encode
-from services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.images import bgr_to_message
+from balltrack.common.messages import encode
+from balltrack.services.locator.geometry import Intrinsics, project_sphere
 from tests.harness import Collector, draw_ball, floor_image, garbage_payloads, query_config
 
 WIDTH, HEIGHT = 640, 480

@@ -2,7 +2,7 @@
 
 import pytest
 
-from common.messages import encode, header
+from balltrack.common.messages import encode, header
 from tests.harness import Collector, garbage_payloads, query_config
 
 

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from common.messages import encode, header
-from services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.messages import encode, header
+from balltrack.services.locator.geometry import Intrinsics, project_sphere
 from tests.harness import Collector, garbage_payloads, query_config
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089

@@ -149,18 +149,18 @@ def test_detections_on_a_located_on_b_printed_on_c(network, launch):
     endpoint = f"tcp/{network.address('a')}:{port}"
     connect = ["--connect", endpoint]
 
-    router = launch("a", "router", ["-m", "common.cli", "router", "--listen", endpoint])
+    router = launch("a", "router", ["-m", "balltrack", "router", "--listen", endpoint])
     router.wait_for_output("listening on", STARTUP)
-    echo = ["-m", "common.cli", "echo", *connect, "--timeout", str(STARTUP)]
+    echo = ["-m", "balltrack", "echo", *connect, "--timeout", str(STARTUP)]
     truths = launch("c", "ground-truth", [*echo, "sim/ground_truth"])
     located = launch("c", "located", [*echo, "detected_ball_3d"])
     example = launch("c", "example", [str(EXAMPLE), *connect])
-    services = {"locator": launch("b", "locator", ["-m", "services.locator", *connect])}
+    services = {"locator": launch("b", "locator", ["-m", "balltrack.services.locator", *connect])}
     for name in ("detector", "follower"):
-        services[name] = launch("a", name, ["-m", f"services.{name}", *connect])
+        services[name] = launch("a", name, ["-m", f"balltrack.services.{name}", *connect])
     # 10 frames a second keep the rendering cheap on a shared machine; the chase is the same.
     services["simulator"] = launch("a", "simulator", [
-        "-m", "services.simulator", *connect, "--set", "scenario=chase",
+        "-m", "balltrack.services.simulator", *connect, "--set", "scenario=chase",
         "--set", "pacing=realtime", "--set", "rate_hz=10"])
     everything = [router, truths, located, example, *services.values()]
     wait_until(lambda: "listening on" in example.output(), STARTUP, "the example app", *everything)

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from common.images import bgr_to_message
-from common.messages import encode, header
-from services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.images import bgr_to_message
+from balltrack.common.messages import encode, header
+from balltrack.services.locator.geometry import Intrinsics, project_sphere
 from tests.harness import Collector, draw_ball, floor_image
 
 WIDTH, HEIGHT = 640, 480

@@ -11,9 +11,9 @@ import msgpack
 import numpy as np
 import pytest
 
-from common.messages import decode, encode, header
-from services.simulator.control import send_command
-from common.clock import TimerTicks
+from balltrack.common.messages import decode, encode, header
+from balltrack.services.simulator.control import send_command
+from balltrack.common.clock import TimerTicks
 from tests.harness import Collector, Liveliness, garbage_payloads, start_service
 
 SMALL = ("width=160", "height=120")

@@ -5,7 +5,7 @@ import sys
 import threading
 import time
 
-from deploy.supervisor import ChildSpec, Supervisor, SupervisorSettings
+from balltrack.deploy.supervisor import ChildSpec, Supervisor, SupervisorSettings
 
 FAST = SupervisorSettings(backoff_initial=0.05, backoff_max=0.2, stable_after=5.0, give_up_after=3,
                           stop_timeout=2.0)

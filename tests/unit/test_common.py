@@ -8,11 +8,11 @@ import msgpack
 import numpy as np
 import pytest
 
-from common.clock import SimClock
-from common.config import ConfigError, load_config, parse_overrides, replace_config
-from common.images import bgr_to_message, image_to_bgr, jpeg_size
-from common.keys import Keys
-from common.messages import MessageError, decode, encode, header
+from balltrack.common.clock import SimClock
+from balltrack.common.config import ConfigError, load_config, parse_overrides, replace_config
+from balltrack.common.images import bgr_to_message, image_to_bgr, jpeg_size
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode, encode, header
 
 
 def ball2d(**changes):

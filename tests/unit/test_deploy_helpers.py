@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from deploy.cli import LaunchError, build_parser, build_specs, endpoint_port, local_endpoint
-from deploy.demo import Goal
-from deploy.supervisor import describe_exit
+from balltrack.deploy.cli import LaunchError, build_parser, build_specs, endpoint_port, local_endpoint
+from balltrack.deploy.demo import Goal
+from balltrack.deploy.supervisor import describe_exit
 
 
 def specs_for(*arguments):

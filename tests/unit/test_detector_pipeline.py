@@ -17,10 +17,10 @@ import cv2
 import numpy as np
 import pytest
 
-from common.config import ConfigError, load_config
-from experiments.real_photos import score_folder, score_image
-from services.detector.config import DetectorConfig
-from services.detector.pipeline import BallDetector, Detection, DetectionResult, annotate
+from balltrack.common.config import ConfigError, load_config
+from balltrack.experiments.real_photos import score_folder, score_image
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.pipeline import BallDetector, Detection, DetectionResult, annotate
 from tests import harness
 
 TENNIS_BGR = (40, 225, 190)  # yellow-green felt under white light (H ~36, S ~210)

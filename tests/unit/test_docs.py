@@ -5,9 +5,9 @@ import re
 
 import pytest
 
-from common import keys as key_table
-from common.messages import SCHEMAS
-from deploy import params
+from balltrack.common import keys as key_table
+from balltrack.common.messages import SCHEMAS
+from balltrack.deploy import params
 from tests.harness import REPO
 
 README = (REPO / "README.md").read_text()

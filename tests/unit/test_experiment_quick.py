@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from experiments import cli
+from balltrack.experiments import cli
 
 
 def test_illumination_writes_results_report_and_plots(tmp_path):

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from common.config import ConfigError, load_config, replace_config
-from services.follower.config import FollowerConfig
-from services.follower.controller import ARRIVED, CHASE, SEARCH, Command, FollowerController
+from balltrack.common.config import ConfigError, load_config, replace_config
+from balltrack.services.follower.config import FollowerConfig
+from balltrack.services.follower.controller import ARRIVED, CHASE, SEARCH, Command, FollowerController
 
 
 def controller(**changes) -> FollowerController:

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from common.config import ConfigError, load_config, replace_config
-from services.locator.config import LocatorConfig
-from services.locator.geometry import (CIRCLE_MODELS, Intrinsics, circle_radius, faithful_v_fov,
+from balltrack.common.config import ConfigError, load_config, replace_config
+from balltrack.services.locator.config import LocatorConfig
+from balltrack.services.locator.geometry import (CIRCLE_MODELS, Intrinsics, circle_radius, faithful_v_fov,
                                        locate_exact, locate_faithful, project_sphere,
                                        silhouette_ellipse)
 

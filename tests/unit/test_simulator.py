@@ -10,15 +10,15 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402
 
-from common.config import ConfigError, load_config  # noqa: E402
-from services.simulator.config import SimulatorConfig  # noqa: E402
-from services.simulator.scenario import (  # noqa: E402
+from balltrack.common.config import ConfigError, load_config  # noqa: E402
+from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
+from balltrack.services.simulator.scenario import (  # noqa: E402
     TENNIS_RADIUS,
     available_scenarios,
     load_scenario,
 )
-from services.simulator.sim import Simulation  # noqa: E402
-from services.simulator.world import build_mjcf  # noqa: E402
+from balltrack.services.simulator.sim import Simulation  # noqa: E402
+from balltrack.services.simulator.world import build_mjcf  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -524,7 +524,7 @@ def test_frame_loop_in_another_thread_with_commands_from_this_one():
 def test_recorder_writes_video_and_ground_truth(tmp_path):
     import json
 
-    from services.simulator.sim import Recorder
+    from balltrack.services.simulator.sim import Recorder
 
     config = SimulatorConfig(width=160, height=120, video_path=str(tmp_path / "run.avi"),
                              ground_truth_path=str(tmp_path / "truth.jsonl"))

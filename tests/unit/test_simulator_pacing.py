@@ -5,8 +5,8 @@ import threading
 
 import pytest
 
-from common.clock import TimerTicks
-from services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+from balltrack.common.clock import TimerTicks
+from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
 
 PERIOD = 1 / 30
 

@@ -18,12 +18,12 @@ import sys
 import threading
 import time
 
-from common import keys as key_table
-from common.config import ConfigError, load_config, parse_overrides
-from common.keys import Keys
-from common.messages import SCHEMAS, SIM_OPS, MessageError, decode, encode
-from common.status import service_status
-from common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, add_session_arguments,
+from balltrack.common import keys as key_table
+from balltrack.common.config import ConfigError, load_config, parse_overrides
+from balltrack.common.keys import Keys
+from balltrack.common.messages import SCHEMAS, SIM_OPS, MessageError, decode, encode
+from balltrack.common.status import service_status
+from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, add_session_arguments,
                             first_error_line, open_from_args, router_config)
 
 
@@ -65,8 +65,8 @@ def command_router(args) -> int:
 def command_detect(args) -> int:
     import cv2
 
-    from services.detector.config import DetectorConfig
-    from services.detector.pipeline import BallDetector
+    from balltrack.services.detector.config import DetectorConfig
+    from balltrack.services.detector.pipeline import BallDetector
 
     try:
         config = load_config(DetectorConfig, args.config, args.overrides, section="detector")
@@ -214,7 +214,7 @@ def _argument_value(text: str):
 
 
 def command_sim(args) -> int:
-    from services.simulator.control import send_command
+    from balltrack.services.simulator.control import send_command
 
     try:
         request = {"op": args.op, **{key: _argument_value(value)
@@ -235,7 +235,7 @@ def command_sim(args) -> int:
 
 
 def command_experiment(args) -> int:
-    from experiments.cli import main as experiment_main
+    from balltrack.experiments.cli import main as experiment_main
 
     return experiment_main(args.rest)
 

@@ -1,0 +1,5 @@
+import sys
+
+from balltrack.cli import main
+
+sys.exit(main())
