@@ -376,8 +376,8 @@ def command_status(args) -> int:
     return 0 if supervisor["running"] else 1
 
 
-def build_parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="python -m deploy", description=__doc__,
+def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
+    parser = ArgumentParser(prog=prog, description=__doc__,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
 
@@ -431,6 +431,6 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "python -m balltrack.deploy") -> int:
+    args = build_parser(prog).parse_args(argv)
     return args.handler(args)

@@ -104,3 +104,47 @@ def test_status_config_echo_hz(router, session, log_dir):
     assert len(printed) == 2 and printed[0]["message"]["fx"] == pytest.approx(CAMERA_INFO["fx"])
     assert "Hz" in hz.output()
     assert locator.stop() == 0
+
+
+def _publish_until_done(session, process, deadline_seconds=30.0):
+    """Put camera_info until ``process`` exits (its subscription is declared asynchronously)."""
+    deadline = time.monotonic() + deadline_seconds
+    while process.poll() is None:
+        assert time.monotonic() < deadline, "the command did not finish"
+        session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+        try:
+            process.wait(0.05)
+        except subprocess.TimeoutExpired:
+            pass
+
+
+@pytest.mark.parametrize("command, lines", [
+    (["echo", "camera/camera_info"], 3),
+    (["hz", "camera/camera_info", "--window", "0.3"], 1),
+])
+def test_commands_in_a_pipe_exit_quietly_when_the_reader_goes(router, session, log_dir, command, lines):
+    error_log = log_dir / "command.err"
+    script = (f"{sys.executable} -m balltrack {' '.join(command)} --connect {router.endpoint} "
+              f"2>{error_log} | head -{lines}; echo \"status ${{PIPESTATUS[0]}}\"")
+    pipeline = subprocess.Popen(["bash", "-c", script], stdout=subprocess.PIPE, text=True,
+                                env=process_environment(), cwd=log_dir)
+    _publish_until_done(session, pipeline)
+    printed = pipeline.stdout.read().splitlines()
+    assert printed[-1] == "status 0", printed
+    assert len(printed[:-1]) == lines
+    assert error_log.read_text() == "", error_log.read_text()
+
+
+@pytest.mark.parametrize("command", [["echo", "camera/camera_info"], ["hz", "camera/camera_info"]])
+def test_long_running_commands_stop_on_sigterm(router, session, log_dir, command):
+    process = Process([sys.executable, "-m", "balltrack", *command, "--connect", router.endpoint],
+                      log_dir / "command.log")
+    # Wait until it is subscribed and printing, so the signal arrives in the running loop.
+    deadline = time.monotonic() + 30
+    while "camera_info" not in process.output():
+        assert time.monotonic() < deadline, process.output()
+        session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+        time.sleep(0.05)  # the publishing rate, not a synchronisation
+    process.popen.terminate()
+    assert process.popen.wait(timeout=10) == 0, process.output()
+    assert "Traceback" not in process.output()

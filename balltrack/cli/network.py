@@ -1,0 +1,133 @@
+"""Commands that talk to running services: router, status, config, sim."""
+
+import json
+import sys
+
+from balltrack.cli.session import networked, open_or_report
+from balltrack.common import keys as key_table
+from balltrack.common.config import ConfigError, parse_overrides
+from balltrack.common.keys import Keys
+from balltrack.common.messages import SIM_OPS, decode, encode
+from balltrack.common.session import DEFAULT_PORT, first_error_line, router_config
+from balltrack.common.shutdown import stop_on_signals
+from balltrack.common.status import service_status
+
+
+def command_router(args) -> int:
+    import zenoh
+
+    listen = args.listen or [f"tcp/0.0.0.0:{DEFAULT_PORT}"]
+    try:
+        session = zenoh.open(router_config(listen, args.connect, args.zenoh_config))
+    except Exception as error:
+        print(f"balltrack router: cannot listen on {', '.join(listen)}: {first_error_line(error)}",
+              file=sys.stderr)
+        return 1
+    print(f"router {session.zid()} listening on {', '.join(listen)}", flush=True)
+    stop = stop_on_signals()
+    while not stop.wait(0.5):
+        pass
+    session.close()
+    return 0
+
+
+def command_status(args) -> int:
+    session = open_or_report(args)
+    if session is None:
+        return 1
+    alive, stats = service_status(session, args.namespace, args.timeout)
+    session.close()
+    print(f"{'service':<10} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
+          f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7}")
+    for service in key_table.SERVICES:
+        row = stats.get(service)
+        figures = (f"{row['received']:>9} {row['published']:>9} {row['rejected']:>8} "
+                   f"{row['dropped']:>8} {row['p50_ms']:>7.2f} {row['p99_ms']:>7.2f}") if row else ""
+        print(f"{service:<10} {'yes' if service in alive else 'no':<6} {figures}")
+    return 0
+
+
+def command_config(args) -> int:
+    try:
+        changes = parse_overrides(args.changes)
+    except ConfigError as error:
+        print(f"balltrack config: {error}", file=sys.stderr)
+        return 2
+    session = open_or_report(args)
+    if session is None:
+        return 1
+    names = Keys(args.namespace)
+    request = encode("ConfigRequest", {"set": changes} if changes else {})
+    replies = list(session.get(names(key_table.config_key(args.service)), payload=request,
+                               timeout=args.timeout))
+    session.close()
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        answer = decode("ConfigReply", reply.ok.payload.to_bytes())
+        if not answer["ok"]:
+            print(f"balltrack config: {answer.get('error')}", file=sys.stderr)
+            return 2
+        print(json.dumps(answer["config"], indent=2))
+        return 0
+    print(f"balltrack config: no {args.service} answered on {names(key_table.config_key(args.service))}",
+          file=sys.stderr)
+    return 1
+
+
+def _argument_value(text: str):
+    """``0.1`` -> 0.1, ``1.5,0.2`` or ``[1.5, 0.2]`` -> [1.5, 0.2], anything else -> the string."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    if "," in text:
+        try:
+            return [float(part) for part in text.split(",")]
+        except ValueError:
+            pass
+    return text
+
+
+def command_sim(args) -> int:
+    from balltrack.services.simulator.control import send_command
+
+    try:
+        request = {"op": args.op, **{key: _argument_value(value)
+                                     for key, value in parse_overrides(args.arguments).items()}}
+    except ConfigError as error:
+        print(f"balltrack sim: {error}", file=sys.stderr)
+        return 2
+    session = open_or_report(args)
+    if session is None:
+        return 1
+    reply = send_command(session, request, args.namespace, args.timeout)
+    session.close()
+    if not reply["ok"]:
+        print(f"balltrack sim: {reply.get('error')}", file=sys.stderr)
+        return 1
+    print(json.dumps(reply))
+    return 0
+
+
+
+def register(commands) -> None:
+    router = commands.add_parser("router", help="run a Zenoh router")
+    router.add_argument("--listen", action="append", metavar="ENDPOINT",
+                        help=f"endpoint to listen on, repeatable (default tcp/0.0.0.0:{DEFAULT_PORT})")
+    router.add_argument("--connect", action="append", metavar="ENDPOINT",
+                        help="another router to join (a cluster), repeatable")
+    router.add_argument("--zenoh-config", metavar="FILE", help="a Zenoh json5 config file")
+    router.set_defaults(handler=command_router)
+
+    networked(commands, "status", "which services are alive, with their stats", command_status)
+    config = networked(commands, "config", "read or change a service's parameters live",
+                       command_config)
+    config.add_argument("service", choices=key_table.SERVICES)
+    config.add_argument("changes", nargs="*", metavar="KEY=VALUE")
+
+    sim = networked(commands, "sim", "control the simulator: reset, set_light, place_ball, "
+                    "place_robot", command_sim)
+    sim.add_argument("op", choices=SIM_OPS)
+    sim.add_argument("arguments", nargs="*", metavar="KEY=VALUE",
+                     help="e.g. diffuse=0.1, id=tennis position=1.5,0.2, scenario=search")

@@ -1,0 +1,24 @@
+"""What every networked ``balltrack`` command shares: its options and opening its session."""
+
+import sys
+
+from balltrack.common.session import SessionOpenError, add_session_arguments, open_from_args
+
+
+def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0):
+    """A subcommand with the session options and ``--timeout``."""
+    sub = commands.add_parser(name, help=help_text, description=help_text)
+    add_session_arguments(sub, config_file=False)
+    sub.add_argument("--timeout", type=float, default=timeout,
+                     help=f"seconds to wait for a router and for answers (default {timeout:g})")
+    sub.set_defaults(handler=handler)
+    return sub
+
+
+def open_or_report(args):
+    """The session, or None after a one-line reason on stderr."""
+    try:
+        return open_from_args(args, open_timeout=args.timeout)
+    except SessionOpenError as error:
+        print(f"balltrack {args.command}: {error}", file=sys.stderr)
+        return None
