@@ -75,7 +75,7 @@ importable() {
     .venv/bin/python - <<'PY' 2>/dev/null
 import importlib.util, sys
 modules = ("zenoh", "cv2", "numpy", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest",
-           "pytest_timeout", "balltrack.common", "balltrack.services", "balltrack.deploy")
+           "pytest_timeout", "hypothesis", "importlinter", "balltrack.common", "balltrack.services", "balltrack.deploy")
 sys.exit(any(importlib.util.find_spec(name) is None for name in modules))
 PY
 }
