@@ -11,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from balltrack.common.geometry import wrap_angle  # noqa: E402
+
 
 def plot_trajectory(path, estimates: list[tuple[float, dict]], truths: list[tuple[float, dict]],
                     title: str = "") -> None:
@@ -79,7 +81,7 @@ def robot_velocities(truths: list[tuple[float, dict]]) -> list[tuple[float, floa
         dx, dy = rb["x"] - ra["x"], rb["y"] - ra["y"]
         heading = ra["yaw"]
         forward = (dx * math.cos(heading) + dy * math.sin(heading)) / dt
-        turn = (rb["yaw"] - ra["yaw"] + math.pi) % (2 * math.pi) - math.pi
+        turn = wrap_angle(rb["yaw"] - ra["yaw"])
         result.append(((t0 + t1) / 2, forward, turn / dt))
     return result
 

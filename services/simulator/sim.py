@@ -43,6 +43,7 @@ import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 import numpy as np  # noqa: E402
 
 from balltrack.common.config import ConfigError  # noqa: E402
+from balltrack.common.geometry import wrap_angle  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
 from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
 from balltrack.services.simulator.world import (  # noqa: E402
@@ -63,11 +64,6 @@ ABSURD_ANGULAR = 100.0
 # A ball this close to the camera plane (m) counts as not in front of it.
 MIN_VISIBLE_DEPTH = 1e-3
 COMMAND_OPS = ("reset", "set_light", "place_ball", "place_robot")
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` wrapped to [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def _finite_number(name: str, value: Any) -> float:
