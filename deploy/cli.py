@@ -20,15 +20,15 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 from balltrack.common.keys import SERVICES, Keys
-from balltrack.common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints, open_session
+from balltrack.common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints
 from balltrack.common.status import service_status
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
-                               die_with_parent, pid_alive, save_launch, supervise)
+                                         die_with_parent, open_for, pid_alive, save_launch, supervise,
+                                         wait_alive)
 
 DEFAULT_RUN_DIR = "runs/default"
 DEFAULT_LISTEN = f"tcp/0.0.0.0:{DEFAULT_PORT}"
@@ -74,100 +74,77 @@ def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, 
 
 def build_specs(args) -> tuple[list[ChildSpec], dict]:
     """The children (router first) and the facts ``status`` needs, from ``start``'s options."""
-    python = sys.executable
     services = [name.strip() for name in args.services.split(",") if name.strip()]
     unknown = [name for name in services if name not in SERVICES]
     if unknown:
         raise LaunchError(f"--services: unknown {', '.join(unknown)} (known: {', '.join(SERVICES)})")
-    Keys(args.namespace)  # raises ValueError for a namespace Zenoh cannot route
-    overrides = parse_service_overrides(args.overrides, services)
+    if not args.router and (args.listen or args.router_connect or args.router_config):
+        raise LaunchError("--listen, --router-connect and --router-config need --router")
+    return make_specs(services, parse_service_overrides(args.overrides, services), router=args.router,
+                      listen=args.listen or [DEFAULT_LISTEN], router_connect=args.router_connect,
+                      router_config=args.router_config, connect=args.connect,
+                      zenoh_config=args.zenoh_config, namespace=args.namespace,
+                      config_dir=args.config_dir, log_level=args.log_level)
+
+
+def make_specs(services: list[str], overrides: dict[str, list[str]], router: bool = False,
+               listen: list[str] = (DEFAULT_LISTEN,), router_connect: list[str] = (),
+               router_config: str | None = None, connect: list[str] | None = None,
+               zenoh_config: str | None = None, namespace: str = "", config_dir: str | None = None,
+               log_level: str = "INFO") -> tuple[list[ChildSpec], dict]:
+    """The children (router first, then ``services`` in order) and the facts ``status`` needs.
+
+    ``overrides`` maps a service to its ``key=value`` settings. With our own router each
+    service must be alive before the next starts, so the last (the simulator) meets a ready
+    pipeline; services of a remote router start at once (it may not be up yet)."""
+    python = sys.executable
+    Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
     specs: list[ChildSpec] = []
-    listen = args.listen or [DEFAULT_LISTEN]
-    if args.router:
+    if router:
         argv = [python, "-m", "balltrack", "router"]
         for endpoint in listen:
             argv += ["--listen", endpoint]
-        for endpoint in args.router_connect:
+        for endpoint in router_connect:
             argv += ["--connect", endpoint]
-        if args.router_config:
-            argv += ["--zenoh-config", absolute(args.router_config)]
+        if router_config:
+            argv += ["--zenoh-config", absolute(router_config)]
         port = endpoint_port(listen[0]) if listen[0].startswith("tcp/") else None
         if port == 0:
             raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
         specs.append(ChildSpec("router", argv, port=port))
-    elif args.listen or args.router_connect or args.router_config:
-        raise LaunchError("--listen, --router-connect and --router-config need --router")
 
-    if args.connect:
-        connect = list(args.connect)
-    elif args.router:
+    if connect:
+        connect = list(connect)
+    elif router:
         connect = [local_endpoint(listen[0])]
-    elif args.zenoh_config:
+    elif zenoh_config:
         connect = []  # the json5 file names the router
     else:
         connect = default_endpoints()
-    config_dir = Path(args.config_dir).resolve() if args.config_dir else None
-    if config_dir is not None and not config_dir.is_dir():
-        raise LaunchError(f"--config-dir: {args.config_dir} is not a directory")
+    config_path = Path(config_dir).resolve() if config_dir else None
+    if config_path is not None and not config_path.is_dir():
+        raise LaunchError(f"--config-dir: {config_dir} is not a directory")
     for name in services:
         argv = [python, "-m", f"balltrack.services.{name}"]
         for endpoint in connect:
             argv += ["--connect", endpoint]
-        if args.namespace:
-            argv += ["--namespace", args.namespace]
-        if args.zenoh_config:
-            argv += ["--zenoh-config", absolute(args.zenoh_config)]
-        if config_dir is not None and (config_dir / f"{name}.toml").is_file():
-            argv += ["--config", str(config_dir / f"{name}.toml")]
-        for override in overrides[name]:
+        if namespace:
+            argv += ["--namespace", namespace]
+        if zenoh_config:
+            argv += ["--zenoh-config", absolute(zenoh_config)]
+        if config_path is not None and (config_path / f"{name}.toml").is_file():
+            argv += ["--config", str(config_path / f"{name}.toml")]
+        for override in overrides.get(name, []):
             argv += ["--set", override]
-        argv += ["--log-level", args.log_level]
-        specs.append(ChildSpec(name, argv))
-    info = {"connect": connect, "namespace": args.namespace, "services": services,
-            "zenoh_config": absolute(args.zenoh_config), "router": bool(args.router)}
+        argv += ["--log-level", log_level]
+        specs.append(ChildSpec(name, argv, wait_alive=router and name != services[-1]))
+    info = {"connect": connect, "namespace": namespace, "services": list(services),
+            "zenoh_config": absolute(zenoh_config), "router": bool(router)}
     return specs, info
 
 
 # -- the network side: liveliness and stats --------------------------------------------------
-def open_for(info: dict, timeout: float):
-    return open_session(info.get("connect") or None, info.get("zenoh_config"), open_timeout=timeout)
-
-
-def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.Event | None = None,
-               failed=lambda: None) -> set[str]:
-    """Wait until every service in ``services`` has its ``alive/<service>`` token; the missing."""
-    deadline = time.monotonic() + timeout
-    keys = Keys(info.get("namespace", ""))
-    try:
-        session = open_for(info, timeout)
-    except SessionOpenError:
-        return set(services)
-    alive: set[str] = set()
-    changed = threading.Condition()
-
-    def on_token(sample):
-        import zenoh
-
-        name = keys.strip(str(sample.key_expr)).split("/", 1)[1]
-        with changed:
-            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
-            changed.notify_all()
-
-    subscriber = session.liveliness().declare_subscriber(keys("alive/*"), on_token, history=True)
-    try:
-        with changed:
-            while not set(services) <= alive and time.monotonic() < deadline:
-                if (stop is not None and stop.is_set()) or failed():
-                    break
-                changed.wait(min(0.2, max(0.0, deadline - time.monotonic())))
-            missing = set(services) - alive
-    finally:
-        subscriber.undeclare()
-        session.close()
-    return missing
-
-
 def network_status(info: dict, timeout: float) -> tuple[set[str] | None, dict[str, dict], str | None]:
     """(alive services or None if unreachable, stats per service, error)."""
     try:
@@ -229,7 +206,8 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
     """Start a supervisor in the background; return once the services are alive.
 
     ``tie_to_parent``: the supervisor (and so everything) gets SIGTERM if this process dies
-    (the demo); without it the supervisor outlives ``python -m deploy start``.
+    (the demo); without it the supervisor outlives ``python -m deploy start``. ``output``
+    (None: quiet) gets a line once the supervisor runs and once the services are alive.
     Raises LaunchError (with the supervisor stopped) if it cannot start or a service fails."""
     run_dir = Path(run_dir).resolve()
     if running_supervisor(run_dir):
@@ -264,7 +242,8 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
         if time.monotonic() > deadline:
             give_up("the supervisor did not start its children in time")
         time.sleep(0.1)  # polling a file the supervisor rewrites; bounded by the deadline
-    print(f"supervisor pid {popen.pid}, run folder {run_dir}", file=output, flush=True)
+    if output is not None:
+        print(f"supervisor pid {popen.pid}, run folder {run_dir}", file=output, flush=True)
     services = info.get("services", [])
     if wait > 0 and services:
         missing = wait_alive(info, services, wait, failed=lambda: bool(failed_children())
@@ -273,7 +252,8 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
             give_up(f"failed: {', '.join(failed_children())}")
         if missing:
             give_up(f"not alive after {wait:.0f} s: {', '.join(sorted(missing))}")
-        print(f"alive: {', '.join(services)}", file=output, flush=True)
+        if output is not None:
+            print(f"alive: {', '.join(services)}", file=output, flush=True)
     return launched
 
 

@@ -3,11 +3,11 @@
     python -m deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS]
 
 Starts a router, the simulator (``chase`` scenario, real-time pacing), the detector, the
-locator and the follower as separate processes under the supervisor (``python -m deploy``),
+locator and the follower as separate processes under the supervisor (``deploy/launcher.py``),
 with the parameter files of ``deploy/config/demo``. Once every service is alive it restarts the
 scenario and watches: the run ends when the robot has reached the ball (ground truth: robot
 centre within 0.35 m of the ball's centre and facing it within 10 degrees, held for 1 s of
-simulated time) or when the time limit (wall seconds) is over.
+simulated time: ``common/referee.py``) or when the time limit (wall seconds) is over.
 
 Into the run folder go the services' logs, ``video.mp4`` (the detector's annotated camera
 frames, ``image_out``, with the locator's 3D estimate written on them), ``trajectory.png``
@@ -29,7 +29,6 @@ import math
 import os
 import queue
 import signal
-import socket
 import sys
 import threading
 import time
@@ -42,13 +41,12 @@ import numpy as np
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
+from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
 from balltrack.common.session import ArgumentParser, open_session
-from balltrack.deploy.cli import LaunchError, launch, parse_service_overrides
-from balltrack.deploy.supervisor import ChildSpec
+from balltrack.deploy.cli import LaunchError, parse_service_overrides
+from balltrack.deploy.launcher import SERVICES, start_system
 
 DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
-# Children in start order: the simulator last, so the pipeline is ready for its first frame.
-DEMO_SERVICES = ("detector", "locator", "follower", "simulator")
 # Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
 # detector compute the colour mask for nobody).
 COUNTED_KEYS = (key_table.IMAGE_RAW, key_table.CAMERA_INFO, key_table.DETECTED_BALL,
@@ -56,57 +54,8 @@ COUNTED_KEYS = (key_table.IMAGE_RAW, key_table.CAMERA_INFO, key_table.DETECTED_B
                 key_table.IMAGE_OUT, key_table.CLOCK, key_table.GROUND_TRUTH)
 
 
-def wrap_angle(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
 def percentile(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
-
-
-def pick_port(preferred: int) -> int:
-    """``preferred`` if nothing listens there, else (or for 0) a free port."""
-    with socket.socket() as probe:
-        try:
-            probe.bind(("127.0.0.1", preferred))
-            return probe.getsockname()[1]
-        except OSError:
-            pass
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-class Goal:
-    """The referee: has the robot reached the ball (distance, heading, held for ``hold`` s)?"""
-
-    def __init__(self, distance: float, heading_degrees: float, hold: float):
-        self.distance = distance
-        self.heading = math.radians(heading_degrees)
-        self.hold = hold
-        self.since: float | None = None
-        self.reached_at: float | None = None
-
-    @staticmethod
-    def errors(truth: dict) -> tuple[float, float]:
-        """(robot centre to nearest ball's centre on the floor, heading error) in m and rad."""
-        robot = truth["robot"]
-        best = None
-        for ball in truth["balls"]:
-            dx, dy = ball["position"][0] - robot["x"], ball["position"][1] - robot["y"]
-            candidate = (math.hypot(dx, dy), abs(wrap_angle(math.atan2(dy, dx) - robot["yaw"])))
-            best = candidate if best is None or candidate[0] < best[0] else best
-        return best if best is not None else (math.inf, math.pi)
-
-    def update(self, t: float, truth: dict) -> bool:
-        distance, heading = self.errors(truth)
-        if distance <= self.distance and heading <= self.heading:
-            self.since = t if self.since is None else self.since
-            if t - self.since >= self.hold and self.reached_at is None:
-                self.reached_at = self.since
-        else:
-            self.since = None
-        return self.reached_at is not None
 
 
 class VideoWriter(threading.Thread):
@@ -187,11 +136,11 @@ class VideoWriter(threading.Thread):
 
 
 class Observer:
-    """This program's own subscriber: counts, arrival times, data for the figures, the goal."""
+    """This program's own subscriber: counts, arrival times, data for the figures, the referee."""
 
-    def __init__(self, session, namespace: str, goal: Goal, video: VideoWriter | None):
+    def __init__(self, session, namespace: str, referee: Referee, video: VideoWriter | None):
         self.keys = Keys(namespace)
-        self.goal = goal
+        self.referee = referee
         self.video = video
         self.lock = threading.Lock()
         self.counts = {key: 0 for key in COUNTED_KEYS if key != key_table.IMAGE_OUT or video}
@@ -276,7 +225,7 @@ class Observer:
                 return
             t = stamp - self.start
             self.truths.append((t, truth))
-            if self.goal.update(t, truth):
+            if self.referee.update(t, truth):
                 self.reached.set()
 
     def _on_image_out(self, payload: bytes, arrival: float) -> None:
@@ -323,24 +272,8 @@ def wait_until(predicate, timeout: float, stop: threading.Event) -> bool:
 def run(args) -> int:
     run_dir = Path(args.run_dir or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    port = pick_port(args.port)
-    endpoint = f"tcp/127.0.0.1:{port}"
     config_dir = Path(args.config_dir).resolve()
-    overrides = parse_service_overrides(args.overrides, list(DEMO_SERVICES))
-    python = sys.executable
-    specs = [ChildSpec("router", [python, "-m", "balltrack", "router", "--listen", endpoint], port=port)]
-    for name in DEMO_SERVICES:
-        argv = [python, "-m", f"balltrack.services.{name}", "--connect", endpoint]
-        if args.namespace:
-            argv += ["--namespace", args.namespace]
-        if (config_dir / f"{name}.toml").is_file():
-            argv += ["--config", str(config_dir / f"{name}.toml")]
-        for override in overrides[name]:
-            argv += ["--set", override]
-        specs.append(ChildSpec(name, argv))
-    info = {"connect": [endpoint], "namespace": args.namespace, "services": list(DEMO_SERVICES),
-            "zenoh_config": None, "router": True}
-
+    settings = parse_service_overrides(args.overrides, list(SERVICES))
     stop = threading.Event()
 
     def on_signal(*_):
@@ -351,25 +284,28 @@ def run(args) -> int:
     for signal_number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signal_number, on_signal)
 
-    print(f"balltrack demo: router on {endpoint}, run folder {run_dir}", flush=True)
-    print(f"  watch it from another terminal: balltrack status --connect {endpoint}", flush=True)
-    goal = Goal(args.reach_distance, args.reach_heading, args.hold)
-    supervisor = None
+    referee = Referee(args.reach_distance, args.reach_heading, args.hold)
+    system = None
     session = observer = video = None
     reached = False
     started_wall = time.monotonic()
     result: dict = {}
     try:
+        print(f"balltrack demo: run folder {run_dir}", flush=True)
         try:
-            supervisor = launch(run_dir, specs, info, wait=args.start_timeout, tie_to_parent=True)
+            system = start_system(run_dir, SERVICES, settings, config_dir, args.namespace, args.port,
+                                  wait=args.start_timeout)
         except LaunchError as error:
             print(f"demo: {error}", file=sys.stderr)
             return 1
+        endpoint = system.endpoint
+        print(f"  router on {endpoint}; watch it from another terminal: balltrack status --connect "
+              f"{endpoint}", flush=True)
         session = open_session([endpoint], open_timeout=10)
         video = None if args.no_video else VideoWriter(run_dir / "video.mp4", 30.0, {})
         if video is not None:
             video.start()
-        observer = Observer(session, args.namespace, goal, video)
+        observer = Observer(session, args.namespace, referee, video)
         # The pipeline is up once the detector answers frames; then the scenario restarts so the
         # run starts with every service ready.
         if not wait_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
@@ -399,7 +335,7 @@ def run(args) -> int:
                 with observer.lock:
                     if observer.truths:
                         t, truth = observer.truths[-1]
-                        distance, heading = Goal.errors(truth)
+                        distance, heading = errors(truth)
                         print(f"  t={t:5.1f} s  distance {distance:.2f} m  heading error "
                               f"{math.degrees(heading):5.1f} deg", flush=True)
             observer.reached.wait(0.2)
@@ -407,15 +343,16 @@ def run(args) -> int:
         chase_seconds = time.monotonic() - chase_wall
         with observer.lock:
             final_t, final_truth = observer.truths[-1] if observer.truths else (0.0, None)
-        result = summarise(args, observer, goal, reached, final_t, final_truth, chase_seconds, endpoint, run_dir)
+        result = summarise(args, observer, referee, reached, final_t, final_truth, chase_seconds, endpoint,
+                           run_dir)
         result["interrupted"] = stop.is_set() and not reached
     finally:
         if observer is not None:
             observer.close()
         if session is not None:
             session.close()
-        if supervisor is not None:
-            code = supervisor.stop()
+        if system is not None:
+            code = system.stop()
             if code != 0:
                 print(f"demo: the supervisor stopped with status {code} (see {run_dir}/supervisor.log)",
                       file=sys.stderr)
@@ -428,9 +365,9 @@ def run(args) -> int:
     return 0 if reached else 1
 
 
-def summarise(args, observer: Observer, goal: Goal, reached: bool, final_t: float, final_truth,
+def summarise(args, observer: Observer, referee: Referee, reached: bool, final_t: float, final_truth,
               chase_seconds: float, endpoint: str, run_dir: Path) -> dict:
-    distance, heading = Goal.errors(final_truth) if final_truth else (None, None)
+    distance, heading = errors(final_truth) if final_truth else (None, None)
     camera_distance = None
     if final_truth and final_truth["balls"]:
         camera_distance = math.dist([0, 0, 0], final_truth["balls"][0]["in_camera"])
@@ -441,9 +378,9 @@ def summarise(args, observer: Observer, goal: Goal, reached: bool, final_t: floa
     simulator = stats.get("simulator", {})
     return {
         "reached": reached,
-        "time_to_reach_s": goal.reached_at,
+        "time_to_reach_s": referee.reached_at,
         "time_limit_s": args.time_limit,
-        "criteria": {"distance_m": args.reach_distance, "heading_deg": args.reach_heading, "hold_s": args.hold},
+        "criteria": referee.criteria(),
         "chase_simulated_s": final_t,
         "chase_wall_s": chase_seconds,
         "final_distance_m": distance,
@@ -547,10 +484,12 @@ def build_parser() -> ArgumentParser:
                         help="parameter files <service>.toml (default deploy/config/demo)")
     parser.add_argument("--set", action="append", default=[], dest="overrides",
                         metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
-    parser.add_argument("--reach-distance", type=float, default=0.35, metavar="M")
-    parser.add_argument("--reach-heading", type=float, default=10.0, metavar="DEG")
-    parser.add_argument("--hold", type=float, default=1.0, metavar="SECONDS",
-                        help="simulated seconds the goal must hold (default 1)")
+    parser.add_argument("--reach-distance", type=float, default=REACH_DISTANCE, metavar="M",
+                        help=f"robot centre to ball centre (default {REACH_DISTANCE})")
+    parser.add_argument("--reach-heading", type=float, default=REACH_HEADING_DEGREES, metavar="DEG",
+                        help=f"facing the ball within (default {REACH_HEADING_DEGREES:g})")
+    parser.add_argument("--hold", type=float, default=HOLD_SECONDS, metavar="SECONDS",
+                        help=f"simulated seconds the reach must hold (default {HOLD_SECONDS:g})")
     parser.add_argument("--start-timeout", type=float, default=90.0, metavar="SECONDS",
                         help="how long the services may take to come up (default 90)")
     parser.add_argument("--no-video", action="store_true", help="no video.mp4 (saves CPU)")

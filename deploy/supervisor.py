@@ -12,7 +12,10 @@ A run folder holds::
 Rules:
 
 * Children start in order. A child with a ``port`` (the router) must accept TCP connections
-  before the next one starts, so services find their router at once.
+  before the next one starts, so services find their router at once. A child with
+  ``wait_alive`` must declare its liveliness token (at most ``alive_timeout`` s) before the
+  next one starts, at its first start only: ``launcher`` starts the simulator after a ready
+  pipeline this way.
 * A child that exits with status 0 was asked to stop (services and the router exit 0 only on
   SIGINT/SIGTERM): it is not restarted. Status 2 is a usage or configuration error that a
   restart cannot fix: the child is marked ``failed``. Any other exit (a crash, a signal such as
@@ -54,6 +57,9 @@ class ChildSpec:
     argv: list[str]
     port: int | None = None  # wait for this local TCP port to accept before starting the next
     env: dict[str, str] = field(default_factory=dict)
+    # At the first start, wait for this service's liveliness token before starting the next,
+    # so that a pipeline is ready for the simulator's first frame (lockstep needs it).
+    wait_alive: bool = False
 
 
 @dataclass
@@ -64,6 +70,7 @@ class SupervisorSettings:
     give_up_after: int = 5
     stop_timeout: float = 15.0
     ready_timeout: float = 20.0
+    alive_timeout: float = 60.0
 
 
 def describe_exit(returncode: int | None) -> str:
@@ -107,6 +114,51 @@ def die_with_parent() -> None:
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+
+
+def open_for(info: dict, timeout: float):
+    """A Zenoh session on the router the launched services use (``info`` of launch.json)."""
+    from balltrack.common.session import open_session
+
+    return open_session(info.get("connect") or None, info.get("zenoh_config"), open_timeout=timeout)
+
+
+def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.Event | None = None,
+               failed=lambda: False) -> set[str]:
+    """Wait until every service in ``services`` has its ``alive/<service>`` token, or
+    ``stop`` is set, or ``failed()`` is true; the services still missing."""
+    import zenoh
+
+    from balltrack.common.keys import Keys
+    from balltrack.common.session import SessionOpenError
+
+    deadline = time.monotonic() + timeout
+    keys = Keys(info.get("namespace", ""))
+    try:
+        session = open_for(info, timeout)
+    except SessionOpenError:
+        return set(services)
+    alive: set[str] = set()
+    changed = threading.Condition()
+
+    def on_token(sample):
+        name = keys.strip(str(sample.key_expr)).split("/", 1)[1]
+        with changed:
+            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
+            changed.notify_all()
+
+    subscriber = session.liveliness().declare_subscriber(keys("alive/*"), on_token, history=True)
+    try:
+        with changed:
+            while not set(services) <= alive and time.monotonic() < deadline:
+                if (stop is not None and stop.is_set()) or failed():
+                    break
+                changed.wait(min(0.2, max(0.0, deadline - time.monotonic())))
+            missing = set(services) - alive
+    finally:
+        subscriber.undeclare()
+        session.close()
+    return missing
 
 
 def write_json_atomically(path: Path, data: dict) -> None:
@@ -240,6 +292,12 @@ class Supervisor:
             if not self.stop.is_set():
                 LOG.warning("%s is not accepting connections on port %d", child.spec.name,
                             child.spec.port)
+        if child.spec.wait_alive and child.restarts == 0:
+            missing = wait_alive(self.info, [child.spec.name], self.settings.alive_timeout, self.stop,
+                                 failed=lambda: child.popen.poll() is not None)
+            if missing and not self.stop.is_set() and child.popen.poll() is None:
+                LOG.warning("%s is not alive after %.0f s; starting the next anyway", child.spec.name,
+                            self.settings.alive_timeout)
         self.write_status()
 
     def _on_exit(self, child: Child, returncode: int) -> None:

@@ -1,11 +1,8 @@
-"""Pure parts of deploy: command lines from options, endpoints, the demo's referee."""
-
-import math
+"""Pure parts of deploy: command lines from options, endpoints (the referee: test_referee.py)."""
 
 import pytest
 
 from balltrack.deploy.cli import LaunchError, build_parser, build_specs, endpoint_port, local_endpoint
-from balltrack.deploy.demo import Goal
 from balltrack.deploy.supervisor import describe_exit
 
 
@@ -62,22 +59,10 @@ def test_endpoints():
     assert describe_exit(-9) == "killed by SIGKILL" and describe_exit(2) == "exit 2"
 
 
-def truth(x, y, yaw, ball=(1.0, 0.0)):
-    return {"robot": {"x": x, "y": y, "yaw": yaw},
-            "balls": [{"id": "tennis", "radius": 0.033, "position": [*ball, 0.033],
-                       "in_camera": [0, 0, 1], "visible": True}]}
 
-
-def test_goal_needs_distance_heading_and_hold():
-    goal = Goal(distance=0.35, heading_degrees=10, hold=1.0)
-    assert Goal.errors(truth(0.0, 0.0, 0.0)) == pytest.approx((1.0, 0.0))
-    assert not goal.update(0.0, truth(0.7, 0.0, 0.0))            # too far
-    assert not goal.update(0.5, truth(0.7, 0.0, math.radians(20)))  # facing away
-    assert not goal.update(1.0, truth(0.7, 0.0, 0.0))            # close and facing: starts the hold
-    assert not goal.update(1.5, truth(0.7, 0.0, math.radians(5)))
-    assert goal.update(2.0, truth(0.72, 0.0, 0.0))
-    assert goal.reached_at == 1.0
-    interrupted = Goal(distance=0.35, heading_degrees=10, hold=1.0)
-    interrupted.update(0.0, truth(0.7, 0.0, 0.0))
-    interrupted.update(0.5, truth(0.0, 0.0, 0.0))  # drove away: the hold restarts
-    assert not interrupted.update(1.2, truth(0.7, 0.0, 0.0))
+def test_with_our_router_each_service_is_alive_before_the_next_starts():
+    specs, _ = specs_for("--router", "--listen", "tcp/0.0.0.0:7500")
+    assert [spec.name for spec in specs] == ["router", "detector", "locator", "follower", "simulator"]
+    assert [spec.wait_alive for spec in specs] == [False, True, True, True, False]
+    specs, _ = specs_for("--services", "detector,locator", "--connect", "tcp/10.0.0.2:7447")
+    assert not any(spec.wait_alive for spec in specs)  # a remote router may not be up yet
