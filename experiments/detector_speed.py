@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from balltrack.services.detector.pipeline import BallDetector
+from balltrack.services.detector.detector import BallDetector
 
 
 def simulator_frames(count: int) -> list[np.ndarray]:

@@ -32,7 +32,7 @@ import cv2
 
 from balltrack.common.config import ConfigError, load_config
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.pipeline import BallDetector
+from balltrack.services.detector.detector import BallDetector
 
 MIN_BALL_PX = 20
 NAME = "real_photos"

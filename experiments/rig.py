@@ -1,7 +1,7 @@
 """In-process test rig: the simulator core, the detector core and the locator geometry together.
 
 The perception experiments render a frame with :class:`services.simulator.sim.Simulation`,
-run :class:`services.detector.pipeline.BallDetector` on it and locate the result with
+run :class:`services.detector.detector.BallDetector` on it and locate the result with
 :mod:`services.locator.geometry`, exactly the computations the services do, without Zenoh in
 between (which would only add transport time). :class:`ClosedLoop` adds the follower's
 controller at 10 Hz on simulated time for the tracking experiments.
@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.pipeline import BallDetector, Detection
+from balltrack.services.detector.detector import BallDetector, Detection
 from balltrack.services.follower.config import FollowerConfig
 from balltrack.services.follower.controller import Command, FollowerController
 from balltrack.services.locator.geometry import (Intrinsics, Position3D, locate_exact, locate_faithful,

@@ -10,7 +10,7 @@ def command_detect(args) -> int:
     import cv2
 
     from balltrack.services.detector.config import DetectorConfig
-    from balltrack.services.detector.pipeline import BallDetector
+    from balltrack.services.detector.detector import BallDetector
 
     try:
         config = load_config(DetectorConfig, args.config, args.overrides, section="detector")

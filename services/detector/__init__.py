@@ -1,5 +1,8 @@
 """The detector service: finds tennis balls in camera frames (paper section 2.2).
 
-``pipeline.py`` is the pure core (blur, CLAHE, HSV mask, Hough circles, checks);
-``config.py`` holds its parameters.
+``detector.py`` is the pure core (``BallDetector``), one module per stage: ``mask.py`` (colour
+mask), ``proposals.py`` (blobs and Hough circles), ``fit.py`` (circle fitting), ``checks.py``
+(candidate checks), ``outline.py`` (sub-pixel outline), ``dark.py`` (dark sides);
+``geometry.py`` holds the circle helpers they share, ``annotate.py`` draws detections, and
+``config.py`` holds the parameters. ``service.py`` is the Zenoh service around the core.
 """

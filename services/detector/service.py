@@ -14,8 +14,9 @@ Example:
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.runner import ServiceContext, run_service
+from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.pipeline import BallDetector, annotate
+from balltrack.services.detector.detector import BallDetector
 
 
 def ball_fields(detection, width: int, height: int) -> dict:

@@ -1,0 +1,224 @@
+"""Candidate checks: step 6's measurements of a circle on the colour mask and the frame, and
+the judgement that makes it a ball or not.
+
+A ball's disc is mostly mask (fill), its rim is a mask edge over most of its visible length
+(edge support), and the more mask lies just around it (leak, outside), the more rim support
+it needs, so a round patch of a large yellow-green area (sunlit trees) fails; the blob is
+vivid enough (colourfulness); in very dark frames the mean colour of the disc must have the
+target's hue too; and its edge is even all round (a box's corners are not).
+"""
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import (FIXED_BITS, Candidate, box_around, disc,
+                                                  fixed_point, fixed_radius, rim_directions)
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
+
+# Below this chroma (raw units) single pixels' hues are rounding noise, so the hue of the
+# candidate's mean colour is checked as well.
+LOW_CHROMA = 6.0
+# A candidate with a spread of its edge distance above CORNER_SPREAD (a square's is ~0.1, a
+# ball's mostly below 0.06 and at most 0.09 on the real dev photos) that also leaks past its
+# rim in places (corners) is a polygon, not a ball.
+CORNER_SPREAD = 0.07
+CORNER_LEAK = 0.08
+# Samples along each ray when measuring how round a blob's edge is.
+EDGE_STEPS = 25
+
+
+@dataclass(frozen=True)
+class MaskMetrics:
+    """How a circle sits on the colour mask (all fractions 0-1 but ``spread``)."""
+
+    visible: float   # rim inside the frame and not explained (by an accepted ball)
+    support: float   # of that rim: mask just inside, not just outside
+    leak: float      # of that rim: mask just outside (the mask goes on past the rim)
+    fill: float      # mask fraction of the disc of 0.85 r
+    outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
+    spread: float    # spread of the mask edge's distance from the centre, over the radius
+
+
+@dataclass(frozen=True)
+class ColourMetrics:
+    """The colour of a circle's disc."""
+
+    colourfulness: float  # mean chroma of its mask pixels over the frame's reference level
+    mean_hue: float       # OpenCV hue (0-180) of the mean colour of the whole disc; -1: grey
+    mean_chroma: float    # chroma (raw units, max - min channel) of that mean colour
+
+
+NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0)
+
+
+@dataclass(frozen=True)
+class CandidateMetrics:
+    """Everything a candidate circle is judged on."""
+
+    mask: MaskMetrics
+    colour: ColourMetrics
+    size: float               # radius over small_radius: below 1, a small ball
+    dark_side: bool = False   # accepted by the dark-side second look (dark.py)
+
+    @property
+    def clean(self) -> bool:
+        """One isolated round blob: nothing around it, a crisp rim, a full disc."""
+        return (self.mask.leak <= 0.05 and self.mask.outside <= 0.05
+                and self.mask.support >= 0.8 and self.mask.fill >= 0.85)
+
+
+def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: int) -> float:
+    """Spread (standard deviation over the radius) of the distance from the centre to the
+    mask's edge, along the rays that leave the mask between 0.7 r and 1.5 r.
+
+    About 0.03 for a ball's disc, 0.1 for a square; rays without such an edge (a touching
+    neighbour, the other colour of a two-colour ball, the frame border) are left out, and
+    with fewer than 6 rays left the spread is 0.
+    """
+    height, width = mask.shape
+    steps = np.linspace(0.7 * radius, 1.5 * radius, EDGE_STEPS)
+    directions = rim_directions(samples)
+    columns = np.rint(x + directions[0][:, None] * steps[None, :]).astype(np.intp)
+    rows = np.rint(y + directions[1][:, None] * steps[None, :]).astype(np.intp)
+    inside = ((columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)).all(axis=1)
+    if np.count_nonzero(inside) < 6:
+        return 0.0
+    values = mask[rows[inside], columns[inside]]
+    on = values == 255
+    first_off = np.argmin(on, axis=1)
+    # The ray starts in the mask, leaves it, and meets no explained (accepted ball) pixel first.
+    edges = steps[first_off]
+    valid = (on[:, 0] & ~on.all(axis=1) & ~(values == EXPLAINED).any(axis=1)
+             & (edges >= 0.85 * radius))
+    if np.count_nonzero(valid) < 6:
+        return 0.0
+    return float(np.std(edges[valid])) / radius
+
+
+def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
+    """How a circle sits on ``mask`` (see MaskMetrics); None when too little of it can be judged.
+
+    ``mask`` is 255 (colour), 0 (not) or EXPLAINED (an accepted ball's disc: neither).
+    """
+    height, width = mask.shape
+    x, y, radius = candidate.x, candidate.y, candidate.radius
+    samples = int(min(96, max(24, 2 * math.pi * radius)))
+    offset = max(1.5, 0.15 * radius)
+    # Rows: inner x, inner y, outer x, outer y of each rim sample.
+    points = np.rint(np.array([[x], [y], [x], [y]])
+                     + np.array([[radius - offset], [radius - offset], [radius + offset],
+                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
+    in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
+    points = points[:, in_frame]
+    inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
+    known = (inner != EXPLAINED) & (outer != EXPLAINED)
+    known_count = int(np.count_nonzero(known))
+    if known_count < 4:
+        return None
+    inner_on, outer_on = inner[known] == 255, outer[known] == 255
+    roundness = edge_spread(x, y, radius, mask, samples)
+
+    outer_radius = 1.45 * radius + 2
+    box = box_around(x, y, outer_radius, width, height)
+    if box is None:
+        return None
+    patch = mask[box]
+    centre_x, centre_y = x - box[1].start, y - box[0].start
+    inside = disc(patch.shape, centre_x, centre_y, 0.85 * radius)
+    ring = disc(patch.shape, centre_x, centre_y, outer_radius)
+    cv2.circle(ring, fixed_point(centre_x, centre_y), fixed_radius(1.15 * radius + 1), 0, -1,
+               cv2.LINE_8, FIXED_BITS)
+    on = cv2.inRange(patch, 255, 255)
+    usable = cv2.bitwise_not(cv2.inRange(patch, EXPLAINED, EXPLAINED))
+    inside &= usable
+    ring &= usable
+    inside_count = cv2.countNonZero(inside)
+    if inside_count == 0:
+        return None
+    ring_count = cv2.countNonZero(ring)
+    return MaskMetrics(
+        visible=known_count / samples,
+        support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
+        leak=float(np.count_nonzero(outer_on)) / known_count,
+        fill=cv2.countNonZero(on & inside) / inside_count,
+        outside=cv2.countNonZero(on & ring) / ring_count if ring_count else 0.0,
+        spread=roundness)
+
+
+def mean_hue(bgr) -> float:
+    """OpenCV hue (0-180) of one BGR colour (floats); -1 for grey."""
+    blue, green, red = (float(channel) for channel in bgr)
+    high, low = max(blue, green, red), min(blue, green, red)
+    if high - low <= 1e-6:
+        return -1.0
+    if high == red:
+        degrees = 60.0 * (green - blue) / (high - low)
+    elif high == green:
+        degrees = 120.0 + 60.0 * (blue - red) / (high - low)
+    else:
+        degrees = 240.0 + 60.0 * (red - green) / (high - low)
+    return (degrees % 360.0) / 2.0
+
+
+def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
+    """The colour of a circle's disc (see ColourMetrics); NO_COLOUR when it holds no mask."""
+    height, width = planes.mask.shape
+    x, y, radius = candidate.x, candidate.y, candidate.radius
+    box = box_around(x, y, 0.85 * radius, width, height)
+    if box is None:
+        return NO_COLOUR
+    inside = disc((box[0].stop - box[0].start, box[1].stop - box[1].start),
+                  x - box[1].start, y - box[0].start, 0.85 * radius)
+    selected = cv2.inRange(planes.mask[box], 255, 255) & inside
+    if not cv2.countNonZero(selected):
+        return NO_COLOUR
+    # Averaging the unblurred disc recovers the hue that uint8 rounding hides in a very
+    # dark frame (a dim orange box can round to yellow pixel by pixel). Grey floor or
+    # black shade inside the disc does not move the hue of the mean.
+    mean_bgr = cv2.mean(planes.frame[box], inside)[:3]
+    return ColourMetrics(colourfulness=cv2.mean(planes.chroma[box], selected)[0] / planes.reference,
+                         mean_hue=mean_hue(mean_bgr),
+                         mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain)
+
+
+def hue_in_range(hue: float, config: DetectorConfig) -> bool:
+    """Whether a hue is within the configured range (half a unit of slack; wraps through 0)."""
+    low, high = config.h_min - 0.5, config.h_max + 0.5
+    if low <= high:
+        return low <= hue <= high
+    return hue >= low or hue <= high
+
+
+def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
+    """Score in [0, 1] of a measured circle, or None when a check fails.
+
+    The more mask lies around the circle (leak, outside), the more of its rim must be a
+    clean edge: a ball touching another keeps most of its rim, a round patch cut out of a
+    large yellow-green area (sunlit trees) does not.
+    """
+    on_mask, colour = metrics.mask, metrics.colour
+    clutter = on_mask.leak + on_mask.outside
+    # A circle cut by the frame edge must still show as much rim as a whole ball of
+    # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
+    # than that must be whole, and have its outline found (see BallDetector._outlines).
+    if (on_mask.visible < max(config.min_visible_fraction, min(1.0, 1.0 / metrics.size))
+            or on_mask.fill < config.min_fill_ratio
+            or on_mask.support < config.min_edge_support + clutter
+            or on_mask.outside > config.max_outside_ratio
+            or colour.colourfulness < config.min_colourfulness):
+        return None
+    if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
+        return None
+    # Corners: the edge's distance from the centre varies and the blob pokes out of the
+    # circle in places (a box face); a ball's edge is even, its neighbours add no spread.
+    if on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
+        return None
+    score = (on_mask.fill + on_mask.support - clutter) / 2.0
+    score = max(0.0, min(1.0, score))
+    if score < config.min_score:
+        return None
+    return score

@@ -1,0 +1,121 @@
+"""Dark sides: step 9 of the detector (see ``detector.py``), the second look at rejected
+candidates.
+
+Under a light with no ambient, a ball's unlit side is black: its colour is a lit cap whose rim
+is part circle, part shading, which the candidate checks take for a corner or a ragged blob. A
+few rejected candidates with something dark around them (``dark_around``) get a second look:
+if the frame shows an outline around the cap (``outline.silhouette``), with all the colour
+inside it and a dark side within it (``dark_side``), the outline is the ball.
+
+(The colour mask of extremely dark frames, whose colour is a grey level or two above black, is
+``mask.py``'s: it switches to wider averages at ``dark_gain``.)
+"""
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.checks import CandidateMetrics, measure_mask
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc
+from balltrack.services.detector.outline import silhouette
+from balltrack.services.detector.proposals import FrameSearch
+
+# Rejected candidates looked at again for a dark side (largest first, per frame). A dark side
+# is at least DARK_SIDE_SHARE of the outline's disc outside the colour mask, on average at most
+# DARK_SIDE_LEVEL times as bright as the lit (colour) part.
+DARK_SIDE_ATTEMPTS = 3
+DARK_SIDE_SHARE = 0.15
+DARK_SIDE_LEVEL = 0.5
+
+
+def _brightness(patch: np.ndarray) -> np.ndarray:
+    """Per pixel the brightest channel (HSV's V) of a BGR patch."""
+    return np.maximum(np.maximum(patch[:, :, 0], patch[:, :, 1]), patch[:, :, 2])
+
+
+def dark_side(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> bool:
+    """Whether the disc of ``ball`` holds a dark side: a good part of it out of the colour
+    mask and clearly darker than the part in it (not a hole, a logo or a box's corner)."""
+    height, width = mask.shape
+    box = box_around(ball.x, ball.y, ball.radius, width, height)
+    if box is None:
+        return False
+    inside = disc(mask[box].shape, ball.x - box[1].start, ball.y - box[0].start, 0.95 * ball.radius)
+    lit = cv2.inRange(mask[box], 255, 255) & inside
+    unlit = cv2.bitwise_not(cv2.inRange(mask[box], 255, 255)) & inside
+    total, lit_count = cv2.countNonZero(inside), cv2.countNonZero(lit)
+    if not total or not lit_count or cv2.countNonZero(unlit) < DARK_SIDE_SHARE * total:
+        return False
+    brightness = _brightness(frame[box])
+    return cv2.mean(brightness, unlit)[0] <= DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
+
+
+def dark_around(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> bool:
+    """Whether at least DARK_SIDE_SHARE of the ring just around ``ball`` (r to 1.5 r) is at
+    most DARK_SIDE_LEVEL times as bright as the colour inside it: where a dark side may be."""
+    height, width = mask.shape
+    outer = 1.5 * ball.radius + 1
+    box = box_around(ball.x, ball.y, outer, width, height)
+    if box is None:
+        return False
+    x, y = ball.x - box[1].start, ball.y - box[0].start
+    shape = mask[box].shape
+    inner = disc(shape, x, y, ball.radius)
+    lit = cv2.inRange(mask[box], 255, 255) & inner
+    ring = disc(shape, x, y, outer) & cv2.bitwise_not(inner)
+    ring_count = cv2.countNonZero(ring)
+    if not ring_count or not cv2.countNonZero(lit):
+        return False
+    brightness = _brightness(frame[box])
+    level = DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
+    dark = cv2.inRange(brightness, 0, max(0.0, level)) & ring
+    return cv2.countNonZero(dark) >= DARK_SIDE_SHARE * ring_count
+
+
+def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[Candidate],
+                explained: np.ndarray, search: FrameSearch, config: DetectorConfig,
+                wide_reach: float,
+                judged: list | None = None) -> list[Candidate]:
+    """``kept`` with the balls found around rejected candidates' dark sides added (largest
+    candidate first, at most DARK_SIDE_ATTEMPTS outline searches, up to max_detections).
+
+    A ball's score is the mean of its fill and rim support, which a dark side lowers (it is
+    not held to min_score). ``explained``: the colour mask with accepted balls marked; each
+    ball found is appended to ``judged`` (when a list) as (ball, metrics, score).
+    """
+    planes = search.planes
+    attempts = 0
+    for candidate, metrics in sorted(rejected, key=lambda item: item[0].radius, reverse=True):
+        if attempts >= DARK_SIDE_ATTEMPTS or len(kept) >= config.max_detections:
+            break
+        if (metrics.colour.colourfulness < config.min_colourfulness
+                or any(circle_overlap(candidate, other) >= 0.3 for other in kept)):
+            continue
+        # (a cheap look first: is there anything dark around the colour at all?)
+        if not dark_around(planes.frame, planes.mask, candidate):
+            continue
+        attempts += 1
+        outline = silhouette(planes.frame, planes.mask, planes.gain, planes.reference,
+                             candidate, kept, wide_reach)
+        if outline is None:
+            continue
+        ball = Candidate(*outline)
+        if (ball.radius < search.min_radius
+                or any(circle_overlap(ball, other) >= 0.3 for other in kept)
+                or not dark_side(planes.frame, planes.mask, ball)):
+            continue
+        # All the colour inside the outline (no leak past its rim), the rim a colour edge.
+        measured = measure_mask(ball, explained)
+        if (measured is None or measured.leak > 0.05 or measured.outside > 0.05
+                or measured.support < config.min_edge_support
+                or measured.visible < max(config.min_visible_fraction,
+                                          min(1.0, search.small_radius / ball.radius))):
+            continue
+        ball.score = max(0.0, min(1.0, (measured.fill + measured.support) / 2.0))
+        if judged is not None:
+            judged.append((ball, dataclasses.replace(metrics, mask=measured, dark_side=True),
+                           ball.score))
+        kept.append(ball)
+    return kept

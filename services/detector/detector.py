@@ -1,0 +1,257 @@
+"""Pure ball-detection core (paper section 2.2), used by the detector service and offline tools.
+
+The paper's pipeline, with the checks that make it hold up on real photos; each stage is a
+module of this package:
+
+1-4. ``mask.py``: brightness normalisation of dark frames, blur, HSV and CLAHE, the colour
+   mask (HSV ranges and a chroma floor) and its morphological clean-up; extremely dark frames
+   are classified on wider averages.
+5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
+   a clean isolated ball, Hough circles inside the blob's box.
+6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
+   boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
+   true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
+   the mean colour, roundness) and judges it.
+7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
+   touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
+8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
+   itself, to a fraction of a pixel. Balls smaller than ``small_radius`` are kept only when
+   their outline is found; the others keep the mask's circle when it is not (clutter all
+   round, too little of the rim in view).
+9. ``dark.py``: a few rejected candidates with something dark around them get a second look
+   for a ball whose unlit side is black.
+
+No zenoh here: arrays in, dataclasses out. ``annotate.py`` draws the detections.
+
+Example::
+
+    import cv2
+    from balltrack.services.detector.annotate import annotate
+    from balltrack.services.detector.config import DetectorConfig
+    from balltrack.services.detector.detector import BallDetector
+
+    detector = BallDetector(DetectorConfig())
+    image = cv2.imread("frame.jpg")
+    result = detector.detect(image)          # result.detections: largest first
+    cv2.imwrite("out.jpg", annotate(image, result.detections))
+"""
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.checks import (CandidateMetrics, colour_stats, judge,
+                                                measure_mask)
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.dark import second_look
+from balltrack.services.detector.fit import refine_on_boundary
+from balltrack.services.detector.geometry import Candidate, circle_overlap
+from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
+from balltrack.services.detector.proposals import (FrameSearch, blob_proposals, frame_search,
+                                                   hough_proposals, leftover_blobs, mask_blobs)
+
+# A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
+# with no ambient: its dark side is found by the outline search, or it is dropped).
+LIT_CAP_SHARE = 0.6
+# Rounds of accepting balls and looking again around them.
+MAX_ROUNDS = 3
+
+Measured = tuple[Candidate, CandidateMetrics]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One ball: centre (u, v) and radius in pixels of the input frame; score in [0, 1]."""
+
+    u: float
+    v: float
+    radius_px: float
+    score: float
+
+
+@dataclass
+class DetectionResult:
+    """All balls found in one frame (largest first) and the colour mask (for ``image_tuning``)."""
+
+    detections: list[Detection] = field(default_factory=list)
+    mask: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+
+
+class BallDetector:
+    """Finds balls of the configured colour in BGR frames of any size.
+
+    Holds no per-frame state, but its OpenCV CLAHE object is not meant to be shared between
+    threads: use one detector per thread. Build a new one to change the configuration.
+    """
+
+    def __init__(self, config: DetectorConfig | None = None):
+        self.config = config if config is not None else DetectorConfig()
+        self._masker = ColourMasker(self.config)
+        # When a list, every judged candidate is appended as (candidate, metrics, score).
+        self._debug: list | None = None
+
+    # ----------------------------------------------------------------------------- public
+    def detect(self, image_bgr: np.ndarray) -> DetectionResult:
+        """Detect balls in one frame; ``image_bgr`` is uint8 HxWx3 (HxW grey is accepted)."""
+        image = check_image(image_bgr)
+        height, width = image.shape[:2]
+        config = self.config
+        scale = 1.0
+        work = image
+        if config.work_width and width > config.work_width:
+            scale = config.work_width / width
+            work_size = (config.work_width, max(8, round(height * scale)))
+            work = cv2.resize(image, work_size, interpolation=cv2.INTER_AREA)
+
+        planes = self._masker.planes(work)
+        candidates = self._find_candidates(planes, scale)
+        detections = [Detection(u=c.x / scale, v=c.y / scale, radius_px=c.radius / scale,
+                                score=round(c.score, 4)) for c in candidates]
+        mask = planes.mask
+        if scale != 1.0:
+            mask = cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
+        return DetectionResult(detections=detections, mask=mask)
+
+    def colour_mask(self, image_bgr: np.ndarray) -> np.ndarray:
+        """The cleaned uint8 (0/255) colour mask of a frame, at the frame's size."""
+        return self._masker.planes(check_image(image_bgr)).mask
+
+    # ------------------------------------------------------------------------- candidates
+    def _find_candidates(self, planes: ColourPlanes, scale: float) -> list[Candidate]:
+        contours = mask_blobs(planes.mask)
+        if not contours:
+            return []
+        search = frame_search(planes, self.config, scale)
+        measured: list[Measured] = []
+        for contour in contours:
+            found = self._blob_candidates(contour, search, planes.mask)
+            if found is None:
+                continue
+            measured.extend(found)
+            if any(metrics.clean for _, metrics in found):
+                continue  # one isolated round blob: nothing for Hough to split
+            proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
+            measured.extend(self._measure_proposals(proposals, search, planes.mask))
+        return self._accept(measured, search)
+
+    def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
+                         mask: np.ndarray) -> list[Measured] | None:
+        """The blob's enclosing circle, refined and measured on ``mask``; None when the blob
+        cannot be or hold a ball."""
+        proposals = blob_proposals(contour, search, mask, self.config)
+        if proposals is None:
+            return None
+        return self._measure_proposals(proposals, search, mask)
+
+    def _measure_proposals(self, proposals: list[Candidate], search: FrameSearch,
+                           mask: np.ndarray) -> list[Measured]:
+        """Refine each proposal on the mask boundary, then measure it on ``mask``."""
+        results: list[Measured] = []
+        fitted_circles: list[Candidate] = []
+        for proposal in proposals:
+            candidate = refine_on_boundary(proposal, search.boundary_x, search.boundary_y)
+            if candidate is None:
+                continue
+            # (the colour of a ball with a dark side, no ambient light, may be a smaller cap)
+            if not (LIT_CAP_SHARE * search.min_radius <= candidate.radius <= search.max_radius):
+                continue
+            if any(math.hypot(candidate.x - other.x, candidate.y - other.y) < 0.1 * other.radius + 0.5
+                   and abs(candidate.radius - other.radius) < 0.1 * other.radius + 0.5
+                   for other in fitted_circles):
+                continue  # converged onto a circle already measured
+            fitted_circles.append(candidate)
+            on_mask = measure_mask(candidate, mask)
+            if on_mask is None:
+                continue
+            metrics = CandidateMetrics(mask=on_mask, colour=colour_stats(candidate, search.planes),
+                                       size=candidate.radius / search.small_radius)
+            results.append((candidate, metrics))
+        return results
+
+    def _accept(self, measured: list[Measured], search: FrameSearch) -> list[Candidate]:
+        """Accept candidates best first, then look again around each accepted ball.
+
+        Mask belonging to an accepted ball is not clutter for the balls around it, so after
+        each round the accepted balls are erased from the mask: candidates near them are
+        measured again, and what is left of their blobs (a ball touching a found one, e.g. a
+        two-colour ball against a plain one) is searched again for enclosing circles.
+        """
+        config = self.config
+        for candidate, metrics in measured:
+            candidate.score = judge(metrics, config) or 0.0
+        pending = sorted(measured, key=lambda item: item[0].score, reverse=True)
+        accepted: list[Candidate] = []
+        explained = search.planes.mask
+        still: list[Measured] = []
+        for _round in range(MAX_ROUNDS):
+            newly: list[Candidate] = []
+            still = []
+            for candidate, metrics in pending:
+                score = judge(metrics, config)
+                if self._debug is not None:
+                    self._debug.append((candidate, metrics, score))
+                if score is not None and all(circle_overlap(candidate, other) < 0.3
+                                             for other in accepted + newly):
+                    candidate.score = score
+                    candidate.needs_outline = metrics.size < 1.0
+                    newly.append(candidate)
+                else:
+                    still.append((candidate, metrics))
+            accepted.extend(newly)
+            if not newly or len(accepted) >= config.max_detections:
+                break
+            explained = explained.copy()
+            for ball in newly:
+                cv2.circle(explained, (int(round(ball.x)), int(round(ball.y))),
+                           int(math.ceil(ball.radius * 1.08 + 1)), EXPLAINED, -1)
+            pending = []
+            for candidate, metrics in still:
+                if any(math.hypot(candidate.x - ball.x, candidate.y - ball.y)
+                       < 1.5 * candidate.radius + ball.radius + 3 for ball in newly):
+                    remeasured = measure_mask(candidate, explained)
+                    if remeasured is None:
+                        continue
+                    metrics = dataclasses.replace(metrics, mask=remeasured)
+                pending.append((candidate, metrics))
+            pending.extend(self._leftover_candidates(newly, explained, search))
+            pending.sort(key=lambda item: item[0].score, reverse=True)
+        accepted.sort(key=lambda c: c.score, reverse=True)
+        accepted = accepted[:config.max_detections]
+        accepted = self._outlines(accepted, still, explained, search)
+        accepted.sort(key=lambda c: c.radius, reverse=True)
+        return accepted
+
+    def _outlines(self, accepted: list[Candidate], rejected: list[Measured],
+                  explained: np.ndarray, search: FrameSearch) -> list[Candidate]:
+        """Every accepted ball's circle replaced by its outline found on the frame (see
+        outline.silhouette); then rejected candidates with a dark side looked at again (see
+        dark.second_look)."""
+        planes = search.planes
+        reach = DARK_WIDE_REACH if planes.dark else WIDE_REACH
+        kept: list[Candidate] = []
+        for ball in accepted:
+            outline = silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
+                                 [other for other in accepted if other is not ball], reach)
+            if outline is not None:
+                ball.x, ball.y, ball.radius = outline
+            elif ball.needs_outline:
+                continue
+            if ball.radius >= search.min_radius:
+                kept.append(ball)
+        return second_look(rejected, kept, explained, search, self.config, reach, self._debug)
+
+    def _leftover_candidates(self, balls: list[Candidate], explained: np.ndarray,
+                             search: FrameSearch) -> list[Measured]:
+        """Enclosing circles of the mask pieces left next to freshly accepted balls, judged."""
+        results: list[Measured] = []
+        for contour in leftover_blobs(balls, explained):
+            found = self._blob_candidates(contour, search, explained)
+            if found:
+                for candidate, metrics in found:
+                    candidate.score = judge(metrics, self.config) or 0.0
+                results.extend(found)
+        return results

@@ -1,0 +1,83 @@
+"""Circles on pixel grids, shared by every stage of the detector: the candidate circle, the box
+of frame around it, sub-pixel discs drawn for the checks, rays around a centre, overlaps.
+
+Pure numpy/OpenCV; no stage logic here.
+"""
+
+import functools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+# Fractional bits of the sub-pixel circles drawn for the checks.
+FIXED_BITS = 4
+
+
+@dataclass
+class Candidate:
+    """A circle that may be a ball: centre (x, y) and radius in pixels of the processed frame."""
+
+    x: float
+    y: float
+    radius: float
+    score: float = 0.0
+    # A small candidate is kept only if its outline is found on the frame (see
+    # BallDetector._outlines).
+    needs_outline: bool = False
+
+
+@functools.lru_cache(maxsize=128)
+def rim_directions(samples: int) -> np.ndarray:
+    """Rows cos, sin, cos, sin of ``samples`` evenly spaced angles (cached: used per circle)."""
+    angles = np.linspace(0.0, 2 * math.pi, samples, endpoint=False)
+    cos, sin = np.cos(angles), np.sin(angles)
+    return np.stack([cos, sin, cos, sin])
+
+
+def box_around(x: float, y: float, reach: float, width: int,
+               height: int) -> tuple[slice, slice] | None:
+    """Rows and columns of the frame within ``reach`` of (x, y); None when empty."""
+    left, right = max(0, int(math.floor(x - reach))), min(width, int(math.ceil(x + reach)) + 1)
+    top, bottom = max(0, int(math.floor(y - reach))), min(height, int(math.ceil(y + reach)) + 1)
+    if left >= right or top >= bottom:
+        return None
+    return slice(top, bottom), slice(left, right)
+
+
+def fixed_point(x: float, y: float) -> tuple[int, int]:
+    """A sub-pixel point in OpenCV's fixed-point drawing units (FIXED_BITS fractional bits)."""
+    return int(round(x * (1 << FIXED_BITS))), int(round(y * (1 << FIXED_BITS)))
+
+
+def fixed_radius(radius: float) -> int:
+    """A sub-pixel radius in OpenCV's fixed-point drawing units (never negative)."""
+    return max(0, int(round(radius * (1 << FIXED_BITS))))
+
+
+def disc(shape: tuple[int, ...], x: float, y: float, radius: float) -> np.ndarray:
+    """uint8 0/255 image of a filled disc (sub-pixel centre and radius)."""
+    image = np.zeros(shape[:2], np.uint8)
+    cv2.circle(image, fixed_point(x, y), fixed_radius(radius), 255, -1, cv2.LINE_8, FIXED_BITS)
+    return image
+
+
+def circle_overlap(first: Candidate, second: Candidate) -> float:
+    """Intersection area of two circles divided by the smaller circle's area."""
+    distance = math.hypot(first.x - second.x, first.y - second.y)
+    r1, r2 = first.radius, second.radius
+    if distance >= r1 + r2:
+        return 0.0
+    small = min(r1, r2)
+    if distance <= abs(r1 - r2):
+        return 1.0
+
+    def clamped_acos(value: float) -> float:
+        return math.acos(max(-1.0, min(1.0, value)))
+
+    part1 = r1 * r1 * clamped_acos((distance ** 2 + r1 ** 2 - r2 ** 2) / (2 * distance * r1))
+    part2 = r2 * r2 * clamped_acos((distance ** 2 + r2 ** 2 - r1 ** 2) / (2 * distance * r2))
+    part3 = 0.5 * math.sqrt(max(0.0, (-distance + r1 + r2) * (distance + r1 - r2)
+                                * (distance - r1 + r2) * (distance + r1 + r2)))
+    return (part1 + part2 - part3) / (math.pi * small * small)

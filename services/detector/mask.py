@@ -1,0 +1,155 @@
+"""The colour mask: steps 1-4 of the detector (see ``detector.py``).
+
+1. Brightness: the frame's reference level (99th percentile of V, at most 3x its median) is
+   measured; a dark frame is scaled up to ``gain_target`` before anything else, so that the
+   blur keeps the colour information that uint8 rounding would otherwise destroy.
+2. Gaussian blur, then HSV; adaptive histogram equalisation (CLAHE) of V, which the
+   ``v_min``/``v_max`` test uses, so that test is relative to the local brightness. Hue and
+   saturation do not depend on brightness: a dark ball keeps its colour.
+3. Colour mask: the HSV ranges, and a chroma (max - min channel, raw units) of at least
+   ``min_chroma``, below which a pixel's hue is rounding or sensor noise (a dark grey floor).
+4. Morphological opening and closing of the mask (specks out, seams and logos filled). In
+   extremely dark frames (gain >= ``dark_gain``: colour 1-2 grey levels above black) steps 2-4
+   work on wider averages instead (``dark_blur_kernel``, chroma floor ``dark_min_chroma``, no
+   opening).
+"""
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.config import DetectorConfig
+
+# Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
+EXPLAINED = 128
+
+
+@dataclass
+class ColourPlanes:
+    """Per-frame images shared by the candidate checks (all at processing size)."""
+
+    mask: np.ndarray        # cleaned colour mask, 0/255
+    frame: np.ndarray       # the BGR frame after the dark-frame gain, before the blur
+    gain: float             # that gain
+    chroma: np.ndarray      # max - min channel after gain and blur (= S * V / 255), uint8
+    reference: float        # the frame's reference level on the ``value`` scale
+    dark: bool = False      # an extremely dark frame (gain >= dark_gain: averaged colour)
+
+
+def ellipse_kernel(size: int) -> np.ndarray | None:
+    """Elliptic structuring element of ``size`` pixels; None (skip the operation) below 2."""
+    if size <= 1:
+        return None
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+
+
+def check_image(image_bgr: np.ndarray) -> np.ndarray:
+    """The frame as uint8 HxWx3 BGR (grey frames are expanded); ValueError for anything else."""
+    if not isinstance(image_bgr, np.ndarray) or image_bgr.dtype != np.uint8:
+        raise ValueError("image must be a uint8 numpy array")
+    if image_bgr.ndim == 3 and image_bgr.shape[2] == 1:
+        image_bgr = image_bgr[:, :, 0]
+    if image_bgr.ndim == 2:
+        image_bgr = cv2.cvtColor(image_bgr, cv2.COLOR_GRAY2BGR)
+    if image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
+        raise ValueError(f"image must be HxWx3 BGR, got shape {image_bgr.shape}")
+    if image_bgr.shape[0] < 8 or image_bgr.shape[1] < 8:
+        raise ValueError(f"image too small: {image_bgr.shape[1]}x{image_bgr.shape[0]}")
+    return image_bgr
+
+
+def reference_level(image_bgr: np.ndarray) -> float:
+    """The frame's bright level: 99th percentile of V, but at most 3x its median.
+
+    The cap keeps a small bright area (the sky above a dimly lit floor, a lamp) from
+    setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample.
+    """
+    height, width = image_bgr.shape[:2]
+    small = cv2.resize(image_bgr, (max(1, width // 4), max(1, height // 4)),
+                       interpolation=cv2.INTER_NEAREST)
+    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2]).ravel()
+    last = value.size - 1
+    ranks = [last // 2, int(0.99 * last)]
+    median, bright = np.partition(value, ranks)[ranks]
+    return float(max(1.0, min(float(bright), 3.0 * float(median))))
+
+
+def frame_gain(reference: float, config: DetectorConfig) -> float:
+    """The dark-frame gain that brings ``reference`` up to gain_target (1 = none)."""
+    if config.max_gain > 1.0:
+        return float(min(config.max_gain, max(1.0, config.gain_target / reference)))
+    return 1.0
+
+
+class ColourMasker:
+    """Builds the colour planes of frames for one configuration.
+
+    Holds an OpenCV CLAHE object, which is not meant to be shared between threads.
+    """
+
+    def __init__(self, config: DetectorConfig):
+        self.config = config
+        self._clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit,
+                                       tileGridSize=(config.clahe_tile_grid, config.clahe_tile_grid))
+                       if config.clahe_clip_limit > 0 else None)
+        self._open_kernel = ellipse_kernel(config.open_kernel)
+        self._close_kernel = ellipse_kernel(config.close_kernel)
+
+    def planes(self, image_bgr: np.ndarray) -> ColourPlanes:
+        """The cleaned colour mask of a checked BGR frame, with the planes the checks read."""
+        config = self.config
+        reference = reference_level(image_bgr)
+        gain = frame_gain(reference, config)
+        # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
+        # sub-unit colour information that uint8 rounding would otherwise destroy.
+        gained = cv2.convertScaleAbs(image_bgr, alpha=gain) if gain > 1.0 else image_bgr
+        # Extremely dark frames (gain of at least dark_gain): the colour is only a grey level
+        # or two above black, so single pixels' hue and chroma are rounding noise; colour is
+        # classified on wider averages instead (dark_blur_kernel), with its own chroma floor,
+        # and no opening (the averaged mask has no specks, and a small lit cap would not
+        # survive it).
+        dark = config.dark_gain > 0 and gain >= config.dark_gain
+        kernel = config.dark_blur_kernel if dark else config.blur_kernel
+        min_chroma = config.dark_min_chroma if dark else config.min_chroma
+        blurred = gained
+        if kernel > 1:
+            blurred = cv2.GaussianBlur(gained, (kernel, kernel), 0)
+        hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
+        # (three extractChannel calls are several times faster than one cv2.split here)
+        hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
+        # Adaptive histogram equalisation: v_min/v_max apply to locally normalised brightness,
+        # so a ball in a shadow keeps its dark side in the mask.
+        equalised = self.equalise(value)
+
+        if config.h_min <= config.h_max:
+            mask = cv2.inRange(hue, config.h_min, config.h_max)
+        else:  # a hue range that wraps through 0 (red)
+            mask = cv2.inRange(hue, config.h_min, 179) | cv2.inRange(hue, 0, config.h_max)
+        mask &= cv2.inRange(saturation, config.s_min, config.s_max)
+        mask &= cv2.inRange(equalised, config.v_min, config.v_max)
+        # chroma (max - min channel) = S * V / 255; raw units are these over the gain
+        chroma = cv2.multiply(saturation, value, scale=1.0 / 255.0)
+        if min_chroma > 0:
+            mask &= cv2.inRange(chroma, min(255, math.ceil(min_chroma * gain - 0.5)), 255)
+        if self._open_kernel is not None and not dark:
+            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open_kernel)
+        if self._close_kernel is not None:
+            mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
+        return ColourPlanes(mask=mask, frame=gained, gain=gain, chroma=chroma,
+                            reference=min(255.0, reference * gain), dark=dark)
+
+    def equalise(self, value: np.ndarray) -> np.ndarray:
+        """CLAHE of the value channel; on a half-size copy for frames wider than 320 px.
+
+        The result only feeds the v_min/v_max test, which needs local brightness, not detail,
+        and CLAHE is the costliest step of the colour mask at full size.
+        """
+        if self._clahe is None:
+            return value
+        height, width = value.shape
+        if width <= 320 or height < 64:
+            return self._clahe.apply(value)
+        small = cv2.resize(value, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
+        return cv2.resize(self._clahe.apply(small), (width, height), interpolation=cv2.INTER_LINEAR)

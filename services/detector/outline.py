@@ -1,0 +1,275 @@
+"""The sub-pixel outline: step 8 of the detector (see ``detector.py``).
+
+Each accepted ball's circle is replaced by its outline located on the frame itself: along rays
+from the centre, the colour edge at its 50 % crossing, then a robust circle fit. The colour
+mask's edge lies where blur has spread the colour (radii 0.5-1 px too large whatever the size,
+the more blurred the frame the more), and a strongly shaded side drags its centre towards the
+lit side; the 50 % crossing of the edge does not move with blur, and edges of shading are told
+from the outline (see ``shading``).
+"""
+
+import math
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.fit import robust_circle
+from balltrack.services.detector.geometry import Candidate, box_around, disc, rim_directions
+
+# Silhouette refinement of accepted balls (radial edge profiles of the frame itself):
+# sample spacing along a ray (px); an edge is a local maximum of the colour gradient along the
+# ray of at least EDGE_SIGNIFICANT of that ray's strongest; rays whose strongest gradient is
+# below EDGE_FLOOR of the median ray's see no edge (a dark side against a dark background).
+RAY_STEP = 0.5
+EDGE_SIGNIFICANT = 0.45
+EDGE_FLOOR = 0.3
+# Half width (px; at most 30 % of the radius) of the profile around an edge whose levels set
+# its 50 % crossing.
+EDGE_HALF_WIDTH = 1.5
+# Edges are looked for from this far (px, plus 15 % of the radius, at most 40 % of it) inside
+# the current circle.
+EDGE_MARGIN = 2.5
+# Shading, not an outline: past the edge the colour is the ball's colour times less than
+# SHADING_SHARE, off that axis by at most SHADING_TOLERANCE of its brightness, or it is
+# nearly black (below DARK_SHARE of the frame's reference level).
+SHADING_SHARE = 0.9
+SHADING_TOLERANCE = 0.12
+DARK_SHARE = 0.03
+# Most wide rounds of the silhouette search (each from the last circle found, until it stops
+# growing) before the narrow one.
+SILHOUETTE_WIDE_ROUNDS = 3
+# Rays of the wide and the narrow rounds (fewer for small balls: one per pixel of rim, >= 24).
+WIDE_RAYS = 36
+NARROW_RAYS = 90
+# Largest blur (Gaussian sigma, px) corrected for.
+BLUR_LIMIT = 2.0
+# The search reaches this many times the colour mask's radius from its centre.
+SILHOUETTE_REACH = 2.6
+# Wide rounds look this many times the current radius (plus 2 px) from its centre; further in
+# extremely dark frames, whose colour mask is only the brightest part of a lit cap (the
+# outline of a ball whose other side is black lies further from it).
+WIDE_REACH = 1.6
+DARK_WIDE_REACH = 2.1
+
+
+def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
+                 directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Colours (rays x radii x 3, float32) sampled bilinearly along rays from (x, y) in
+    ``patch``, and per ray the distances along it at which it enters and leaves the patch."""
+    map_x = (x + directions[0][:, None] * radii[None, :]).astype(np.float32)
+    map_y = (y + directions[1][:, None] * radii[None, :]).astype(np.float32)
+    height, width = patch.shape[:2]
+    values = cv2.remap(patch, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    enter = np.full(directions.shape[1], -np.inf)
+    leave = np.full(directions.shape[1], np.inf)
+    for position, direction, size in ((x, directions[0], width), (y, directions[1], height)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            low, high = (0.0 - position) / direction, (size - 1.0 - position) / direction
+        flat = np.abs(direction) < 1e-9
+        low = np.where(flat, np.where(0.0 <= position <= size - 1.0, -np.inf, np.inf), low)
+        high = np.where(flat, np.where(0.0 <= position <= size - 1.0, np.inf, -np.inf), high)
+        enter = np.maximum(enter, np.minimum(low, high))
+        leave = np.minimum(leave, np.maximum(low, high))
+    return values.reshape(map_x.shape + (-1,)), enter, leave
+
+
+def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Significant colour-gradient peaks along each ray (rays x samples, only where
+    ``allowed``), whether each ray sees an edge at all, and the gradient (per sample step)."""
+    rays, count = profiles.shape[:2]
+    difference = profiles[:, 2:] - profiles[:, :-2]
+    gradient = np.zeros((rays, count), np.float32)
+    gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
+    gradient[~allowed] = 0.0
+    strongest = gradient.max(axis=1)
+    floor = EDGE_FLOOR * float(np.median(strongest)) if rays else 0.0
+    peak = np.zeros((rays, count), bool)
+    middle = gradient[:, 1:-1]
+    peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
+                     & (middle >= EDGE_SIGNIFICANT * strongest[:, None]))
+    return peak, peak.any(axis=1) & (strongest > max(floor, 1e-3)), gradient
+
+
+def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: np.ndarray,
+            half: int, quantum: float, dark: float) -> np.ndarray:
+    """Whether edges (at ``index`` along ``rays``) are shading rather than an outline: going
+    outwards the colour darkens into a darker version of the ball's ``colour`` (within
+    ``quantum``, the frame's rounding step) or into near black (below ``dark``)."""
+    count = profiles.shape[1]
+    inner = profiles[rays, np.maximum(index - half, 0)]
+    outer = profiles[rays, np.minimum(index + half, count - 1)]
+    brightness_in = np.sqrt((inner * inner).sum(axis=1))
+    brightness_out = np.sqrt((outer * outer).sum(axis=1))
+    share = (outer @ colour) / max(float(colour @ colour), 1e-6)
+    off_axis = outer - share[:, None] * colour
+    off_axis = np.sqrt((off_axis * off_axis).sum(axis=1))
+    ball_like = (share < SHADING_SHARE) & (off_axis <= SHADING_TOLERANCE * brightness_out + quantum)
+    return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
+
+
+def crossings(profiles: np.ndarray, index: np.ndarray,
+              half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-sample position (in samples) of the 50 % crossing between the levels ``half``
+    samples inside and outside each ray's edge ``index``, whether it is well defined, and the
+    contrast between those levels."""
+    rays, count = profiles.shape[:2]
+    rows = np.arange(rays)
+    offsets = np.arange(-half, half + 1)
+    window = np.clip(index[:, None] + offsets[None, :], 0, count - 1)
+    values = profiles[rows[:, None], window]                      # rays x (2 half + 1) x 3
+    level_in, level_out = values[:, 0], values[:, -1]
+    contrast = level_in - level_out
+    norm = np.einsum("ij,ij->i", contrast, contrast)
+    share = np.einsum("ijk,ik->ij", values - level_out[:, None, :], contrast)
+    share /= np.maximum(norm, 1e-9)[:, None]
+    above = share >= 0.5
+    # the outermost sample still at least half way to the inside level, and the next one
+    last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
+    s0, s1 = share[rows, last], share[rows, last + 1]
+    fraction = np.where(s0 - s1 > 1e-6, (s0 - 0.5) / np.maximum(s0 - s1, 1e-6), 0.0)
+    position = index + offsets[last] + np.clip(fraction, 0.0, 1.0)
+    return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
+
+
+def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: float,
+               ball: Candidate, others: list[Candidate],
+               wide_reach: float = WIDE_REACH) -> tuple[float, float, float] | None:
+    """The ball's outline located on the frame itself, to a fraction of a pixel.
+
+    Along rays from the centre, the colour edges from just inside the colour mask's circle
+    outwards are located at their 50 % crossing (so blur, which spreads the colour mask, does
+    not move them) and a circle is fitted to them robustly. Wide rounds, each from the last
+    circle, look for the outline either as each ray's first edge that is not shading (a ball
+    in front of other edges) or as its outermost edge (a dark side that the colour mask
+    misses); the hypothesis that more rays agree on wins (about as many: the larger circle,
+    if it fits about as closely). A narrow round then takes each
+    ray's edge nearest the circle. None when too few rays see an edge, when they see it on
+    one side only, or when the result does not contain most of the colour mask's circle.
+
+    Rays are used only within the frame (a ball cut by its edge keeps the visible arc) and not
+    towards ``others`` (touching balls); a ray whose edge has colour-mask pixels just past it
+    (yellow-green clutter touching the ball) is left out.
+
+    ``frame``: the BGR frame after the dark-frame ``gain`` (whose rounding step tells shading
+    from an outline); ``reference``: its reference level (near black is below DARK_SHARE of
+    it); ``mask``: its colour mask; ``wide_reach``: WIDE_REACH or, in extremely dark frames,
+    DARK_WIDE_REACH. Returns the outline's (x, y, radius) in the frame's pixels.
+    """
+    height, width = mask.shape
+    x0, y0, r0 = ball.x, ball.y, ball.radius
+    reach = SILHOUETTE_REACH * r0 + 6
+    box = box_around(x0, y0, reach, width, height)
+    if box is None:
+        return None
+    left, top = box[1].start, box[0].start
+    patch = frame[box].astype(np.float32)
+    patch_mask = mask[box]
+    # The ball's colour: the mean of its lit, colour-mask part.
+    lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0) & cv2.inRange(patch_mask, 255, 255)
+    if not cv2.countNonZero(lit):
+        return None
+    colour = np.array(cv2.mean(patch, lit)[:3], np.float32)
+    dark = DARK_SHARE * reference
+
+    x, y, radius = x0 - left, y0 - top, r0
+    wide_rounds = 0
+    while True:
+        wide = wide_rounds < SILHOUETTE_WIDE_ROUNDS
+        samples = int(min(WIDE_RAYS if wide else NARROW_RAYS, max(24, round(2 * math.pi * radius))))
+        directions = rim_directions(samples)
+        cos, sin = directions[0], directions[1]
+        if wide:  # from just inside the circle to well past it
+            start = radius - min(EDGE_MARGIN + 0.15 * radius, 0.4 * radius)
+            stop, step = wide_reach * radius + 2, max(RAY_STEP, radius / 60.0)
+            rounds = ((0.3, 2.0), (0.1, 1.0))
+        else:  # a narrow band around the circle found
+            band = max(1.5, 0.15 * radius)
+            start, stop, step = radius - band, radius + band, RAY_STEP
+            rounds = ((0.08, 1.0), (0.05, 0.6), (0.03, 0.45))
+        half = max(1, int(round(min(EDGE_HALF_WIDTH, 0.3 * radius) / step)))
+        radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
+                          dtype=np.float32)
+        profiles, enter, leave = ray_profiles(patch, x, y, radii, directions)
+        # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
+        # room for the levels around an edge.
+        margin = (half + 1) * step
+        allowed = ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
+                   & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
+        usable = allowed.any(axis=1)
+        for other in others:  # rays towards another ball see its colour, not this outline
+            dx, dy = other.x - left - x, other.y - top - y
+            distance = math.hypot(dx, dy)
+            if 1e-6 < distance < stop + 1.15 * other.radius + 1:
+                half_angle = math.asin(min(1.0, (1.15 * other.radius + 1) / distance))
+                bearing = math.cos(half_angle)
+                usable &= (cos * dx + sin * dy) / distance < bearing
+        allowed &= usable[:, None]
+        in_view = np.count_nonzero(usable)
+        # (the rays in view of a ball cut by the frame's edge all point one way)
+        one_sided = max(0.7, math.hypot(cos[usable].mean(), sin[usable].mean()) + 0.1) if in_view else 0.7
+        peak, has_edge, gradient = edge_peaks(profiles, allowed)
+        if wide:
+            ray_index, sample_index = np.nonzero(peak)
+            outline = peak.copy()
+            outline[ray_index, sample_index] = ~shading(profiles, ray_index, sample_index, colour,
+                                                         half, gain, dark)
+            first = np.argmax(outline, axis=1)
+            outermost = peak.shape[1] - 1 - np.argmax(peak[:, ::-1], axis=1)
+            choices = [(first, outline.any(axis=1))]
+            if np.count_nonzero((first != outermost) & has_edge) >= 0.15 * samples:
+                choices.append((outermost, has_edge))
+        else:
+            away = np.where(peak, np.abs(radii - radius)[None, :], np.inf)
+            choices = [(np.argmin(away, axis=1), has_edge)]
+        fits = []
+        for index, found in choices:
+            position, defined, contrast = crossings(profiles, index, half)
+            rho = radii[0] + position * step
+            px, py = x + cos * rho, y + sin * rho
+            # The colour mask must not go on past the edge (clutter touching the ball).
+            beyond = rho + max(2.0, 0.12 * radius)
+            bx = np.clip(np.rint(x + cos * beyond), 0, patch.shape[1] - 1).astype(np.intp)
+            by = np.clip(np.rint(y + sin * beyond), 0, patch.shape[0] - 1).astype(np.intp)
+            good = usable & has_edge & found & defined & (patch_mask[by, bx] != 255)
+            if np.count_nonzero(good) < max(8, 0.35 * in_view):
+                continue
+            fitted = robust_circle(px[good], py[good], x, y, radius, rounds, geometric=not wide)
+            if fitted is None:
+                continue
+            keep = fitted[3]
+            if (np.count_nonzero(keep) < max(8, 0.3 * in_view)
+                    or math.hypot(cos[good][keep].mean(), sin[good][keep].mean()) > one_sided
+                    or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
+                continue  # the edge seen on too few rays, or on one side only
+            residual = np.hypot(px[good][keep] - fitted[0], py[good][keep] - fitted[1]) - fitted[2]
+            # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
+            slope = gradient[np.arange(samples), index][good][keep] / (2 * step)
+            width = contrast[good][keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+            fits.append((fitted[:3], np.count_nonzero(keep), float(np.sqrt(np.mean(residual * residual))),
+                         float(np.median(width))))
+        # The hypothesis most rays agree on; among about equally good ones the larger circle
+        # (the outline is the outermost circle; shading edges inside a small ball fit too).
+        best = None
+        if fits:
+            most = max(fit[1] for fit in fits)
+            tightest = min(fit[2] for fit in fits if fit[1] >= most / 1.05)
+            chosen = max((fit for fit in fits if fit[1] >= most / 1.05 and fit[2] <= 1.5 * tightest + 0.05),
+                         key=lambda fit: fit[0][2])
+            best, sigma = chosen[0], chosen[3]
+        if best is None:
+            return None
+        grown = best[2] - radius
+        x, y, radius = best[:3]
+        if not wide:
+            # The 50 % contour of a disc blurred by sigma lies sigma^2 / 2r inside its edge.
+            radius += min(sigma, BLUR_LIMIT) ** 2 / (2.0 * radius)
+            break
+        # Each wide round starts from the last circle, reaching further into a dark side;
+        # once the circle stops growing (no dark side, or all of it), the narrow round.
+        wide_rounds = SILHOUETTE_WIDE_ROUNDS if grown < 0.05 * radius + 0.3 else wide_rounds + 1
+    x, y = x + left, y + top
+    # The colour mask's circle is the outline or a lit part inside it (a dark side it misses).
+    shift = math.hypot(x - x0, y - y0)
+    if not (0.85 * r0 - 1.0 <= radius <= 2.2 * r0 + 2.0 and shift + 0.7 * r0 <= radius + 1.0):
+        return None
+    return x, y, radius
