@@ -7,18 +7,55 @@ packing so a service never publishes what its peers would reject. Extra fields a
 """
 
 import math
+import reprlib
 from typing import Any, Callable
 
 import msgpack
 
 MAX_IMAGE_SIDE = 8192
 MAX_LIST = 4096
+# A header is copied downstream with every derived message: it carries only its contract
+# fields, and a frame id longer than this is refused (ROS frame ids are a few words).
+MAX_FRAME_ID = 64
+HEADER_FIELDS = ("stamp", "frame_id", "seq")
+# Nesting levels a message may have (the contract's deepest, GroundTruth, has 4).
+MAX_DEPTH = 32
 ENCODINGS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
 SIM_OPS = ("reset", "set_light", "place_ball", "place_robot")
+DISTORTION_MODELS = ("plumb_bob", "", "none")
 
 
 class MessageError(ValueError):
     """A payload that does not decode or does not validate."""
+
+
+class _ShortRepr(reprlib.Repr):
+    """reprlib with a size summary for bytes (whose plain repr would be as long as the data)."""
+
+    def repr_bytes(self, value, level):
+        return f"<{len(value)} bytes>"
+
+    repr_bytearray = repr_memoryview = repr_bytes
+
+
+_SHORT_REPR = _ShortRepr()
+_SHORT_REPR.maxlevel = 3
+_SHORT_REPR.maxstring = _SHORT_REPR.maxother = 60
+_SHORT_REPR.maxlong = 30
+
+
+def shorten(value: Any, limit: int = 120) -> str:
+    """One line of at most about ``limit`` characters describing ``value``, for error messages
+    and logs: a peer's 1 MB string or 1,000-deep list must not be copied into every reply and
+    log line (nor overflow the recursion limit while being formatted). A string is shown as
+    itself, anything else as a bounded repr."""
+    try:
+        text = value if isinstance(value, str) else _SHORT_REPR.repr(value)
+    except Exception as error:  # a repr that fails must not turn a rejection into a crash
+        text = f"<{type(value).__name__}: unprintable ({type(error).__name__})>"
+    if len(text) > limit:
+        text = f"{text[:limit]}... ({len(text)} characters)"
+    return text.replace("\r", "\\r").replace("\n", "\\n")
 
 
 Check = Callable[[Any, str], Any]
@@ -62,7 +99,7 @@ def text(choices: tuple[str, ...] | None = None, max_length: int = 256) -> Check
         if len(value) > max_length:
             _fail(path, f"string longer than {max_length}")
         if choices is not None and value not in choices:
-            _fail(path, f"{value!r} is not one of {', '.join(choices)}")
+            _fail(path, f"{shorten(repr(value), 60)} is not one of {', '.join(choices)}")
         return value
     return check
 
@@ -124,7 +161,18 @@ def identifier(value, path):
     return value
 
 
-HEADER = record({"stamp": integer(0), "frame_id": text(), "seq": integer(0)})
+_HEADER_RECORD = record({"stamp": integer(0), "frame_id": text(max_length=MAX_FRAME_ID),
+                         "seq": integer(0)})
+
+
+def _header(value, path):
+    """The header's contract fields only: services copy a header into what they derive from
+    the message, so anything else it carried (say a 1 MB extra field) would travel on."""
+    checked = _HEADER_RECORD(value, path)
+    return {name: checked[name] for name in HEADER_FIELDS}
+
+
+HEADER = _header
 
 BALL2D_FIELDS = {
     "x": number(-1.0001, 1.0001),
@@ -166,6 +214,11 @@ SCHEMAS: dict[str, Check] = {
         "width": integer(1, MAX_IMAGE_SIDE), "height": integer(1, MAX_IMAGE_SIDE),
         "fx": number(1e-6), "fy": number(1e-6), "cx": number(), "cy": number(),
         "hfov": number(1e-6, math.pi), "vfov": number(1e-6, math.pi),
+    }, {
+        # Lens distortion, as ROS names it: "plumb_bob" with d = [k1, k2, p1, p2, k3] (up to 8
+        # coefficients: k4, k5, k6 of the rational model), or "" / "none" (or absent): none.
+        "distortion_model": text(DISTORTION_MODELS),
+        "d": listing(number(), max_items=8),
     }),
     "Ball2D": record({"header": HEADER, **BALL2D_FIELDS}),
     "Ball2DArray": record({"header": HEADER, "balls": listing(record(BALL2D_FIELDS))}),
@@ -215,6 +268,24 @@ def encode(name: str, message: dict) -> bytes:
     return msgpack.packb(validate(name, message), use_bin_type=True)
 
 
+def _check_depth(message: Any, limit: int = MAX_DEPTH) -> None:
+    """Refuse values nested deeper than ``limit``: no contract message goes past 4 levels, and
+    msgpack packs only 511 (it unpacks 1,024), so a deeper value could not be passed on."""
+    level = [message]
+    for _ in range(limit + 1):
+        deeper = []
+        for value in level:
+            if isinstance(value, dict):
+                deeper.extend(item for item in value.values() if isinstance(item, (dict, list)))
+                deeper.extend(item for item in value if isinstance(item, tuple))
+            elif isinstance(value, (list, tuple)):
+                deeper.extend(item for item in value if isinstance(item, (dict, list, tuple)))
+        if not deeper:
+            return
+        level = deeper
+    raise MessageError(f"nested deeper than {limit} levels")
+
+
 def decode(name: str, payload: bytes | bytearray | memoryview) -> dict:
     """Unpack and validate; every failure is a MessageError with a one-line reason."""
     if not payload:
@@ -223,7 +294,8 @@ def decode(name: str, payload: bytes | bytearray | memoryview) -> dict:
         message = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False,
                                   max_array_len=1 << 16, max_map_len=1 << 12)
     except Exception as error:  # msgpack raises several unrelated exception types
-        raise MessageError(f"not msgpack ({type(error).__name__}: {error})"[:200]) from None
+        raise MessageError(f"not msgpack ({type(error).__name__}: {shorten(str(error), 150)})") from None
+    _check_depth(message)
     return validate(name, message)
 
 

@@ -33,7 +33,7 @@ from balltrack.common import keys as key_table
 from balltrack.common.clock import SimClock, TimerTicks, WallClock
 from balltrack.common.config import ConfigError, config_to_dict, load_config, replace_config
 from balltrack.common.keys import Keys
-from balltrack.common.messages import MessageError, decode, encode
+from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
@@ -42,6 +42,10 @@ LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 class RateLimitedLog:
     """Logs a (key, kind) at most once per ``period`` seconds, counting what it held back."""
 
+    # Kinds come from peers' payloads: past this many, every new kind shares one slot per key,
+    # so neither the table nor the log grows with what a fuzzer sends.
+    MAX_KINDS = 256
+
     def __init__(self, logger: logging.Logger, period: float = 5.0):
         self.logger = logger
         self.period = period
@@ -49,17 +53,19 @@ class RateLimitedLog:
         self._suppressed: collections.Counter = collections.Counter()
         self._lock = threading.Lock()
 
-    def warning(self, key: str, reason: str) -> None:
-        kind = (key, reason.split(":")[0])
+    def warning(self, key: str, reason: str, what: str = "rejected message") -> None:
+        kind = (key, shorten(reason.split(":")[0], 40))
         now = time.monotonic()
         with self._lock:
+            if kind not in self._last and len(self._last) >= self.MAX_KINDS:
+                kind = (key, "other")
             if now - self._last.get(kind, -1e9) < self.period:
                 self._suppressed[kind] += 1
                 return
             self._last[kind] = now
             held_back = self._suppressed.pop(kind, 0)
         suffix = f" ({held_back} similar suppressed)" if held_back else ""
-        self.logger.warning("rejected message on %s: %s%s", key, reason, suffix)
+        self.logger.warning("%s on %s: %s%s", what, key, shorten(reason, 300), suffix)
 
 
 class Stats:
@@ -177,7 +183,7 @@ class ServiceContext:
             self.reject(key, str(error))
             return
         except Exception as error:  # a bug must not kill the service; it is logged loudly
-            self.reject(key, f"internal error: {error!r}")
+            self.reject(key, f"internal error: {shorten(error)}")
             self.log.debug("%s", traceback.format_exc())
             return
         if count:
@@ -267,16 +273,28 @@ class ServiceContext:
 
 
 def _serve_config(context: ServiceContext, query) -> None:
+    """Answer one ``<service>/config`` query; every request gets a reply, a bad one ``ok:
+    false`` with a short reason (counted and logged, rate-limited, like a rejected message)."""
+    key = context.keys(key_table.config_key(context.name))
     try:
         payload = query.payload.to_bytes() if query.payload is not None else b""
         request = decode("ConfigRequest", payload) if payload else {}
         if request.get("set"):
             context.set_config(request["set"])
-            context.log.info("config changed: %s", request["set"])
+            context.log.info("config changed: %s", shorten(request["set"], 300))
         reply = {"ok": True, "config": config_to_dict(context.config)}
     except (MessageError, ConfigError) as error:
-        reply = {"ok": False, "error": str(error)}
-    query.reply(query.key_expr, encode("ConfigReply", reply))
+        reply = {"ok": False, "error": shorten(str(error), 300)}
+    except Exception as error:  # e.g. a value too deep to format: still an answer, not silence
+        reply = {"ok": False, "error": f"bad request ({shorten(error, 300)})"}
+    if not reply["ok"]:
+        context.reject(key, reply["error"])
+    try:
+        answer = encode("ConfigReply", reply)
+    except MessageError as error:  # our own reply is invalid: say so rather than stay silent
+        context.log.error("config reply not encodable: %s", shorten(str(error)))
+        answer = encode("ConfigReply", {"ok": False, "error": "internal error: reply not encodable"})
+    query.reply(query.key_expr, answer)
 
 
 def build_parser(name: str, description: str | None) -> argparse.ArgumentParser:

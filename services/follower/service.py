@@ -52,10 +52,13 @@ def build(service: ServiceContext):
             command = controller.tick(now_ns / 1e9)
             header = last_header["header"]
         if command.mode == SEARCH or header is None:
-            header = {"stamp": now_ns, "frame_id": "base_link", "seq": header["seq"] if header else 0}
+            header = {"stamp": now_ns, "seq": header["seq"] if header else 0}
+        # Only the contract's header fields travel on: whatever else a peer put into the
+        # detection's header must not be repeated in every command (ten times a second).
         # ``time`` (the clock at this tick) and ``mode`` are fields added to the contract's Twist:
         # a lockstep simulator waits for the tick stamped with its frame time.
-        output.put({"header": {**header, "frame_id": "base_link"}, "time": now_ns, "mode": command.mode,
+        output.put({"header": {"stamp": header["stamp"], "frame_id": "base_link", "seq": header["seq"]},
+                    "time": now_ns, "mode": command.mode,
                     "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]})
 
     # Both are subscribed so that keep_target can be switched live.

@@ -50,6 +50,9 @@ A problem (missing file, bad TOML, unknown key, wrong type, out-of-range value) 
 """
 
 import math
+import os
+import re
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -57,6 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from balltrack.common.config import ConfigError
+from balltrack.common.messages import shorten
 
 SCENARIO_DIR = Path(str(resources.files("balltrack.services.simulator") / "scenarios"))
 TENNIS_RGB = (0.7, 0.85, 0.15)
@@ -72,6 +76,10 @@ MOTION_TYPES = ("line", "circle")
 SHAPES = ("box", "cylinder", "sphere")
 # How close (m) the robot's centre may come to the world's edge.
 ROBOT_MARGIN = 0.2
+# A scenario file is a few hundred bytes; anything far larger is not one (or is /dev/zero).
+MAX_SCENARIO_BYTES = 1 << 20
+# What a network request may name: a file stem, no path (see requested_scenario).
+SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -439,17 +447,61 @@ def scenario_path(name_or_path: str) -> Path:
     return SCENARIO_DIR / f"{text}.toml"
 
 
+def requested_scenario(name: Any, folder: str | Path | None = None) -> Path:
+    """The scenario file a network request (``sim/control`` reset) may load: a name, looked up
+    among the shipped scenarios and then in ``folder`` (the folder of the scenario file the
+    simulator was started with, if any), or the absolute path of a ``.toml`` file in ``folder``.
+    A peer must not make the simulator read files of its choosing (``../../etc/hostname``,
+    ``/dev/zero``): anything else, and anything that is not a regular file whose real location
+    is one of those folders, is refused with ConfigError."""
+    if not isinstance(name, str):
+        raise ConfigError(f"scenario: expected a scenario name, got {type(name).__name__}")
+    text = name.strip()
+    folders = [SCENARIO_DIR.resolve()] + ([Path(folder).resolve()] if folder is not None else [])
+    if "/" in text or "\\" in text:
+        candidates = [Path(text)] if len(text) <= 4096 and Path(text).is_absolute() else []
+        folders = folders[1:]  # a path names a file in the configured folder, never elsewhere
+    else:
+        candidates = [candidate_folder / (text if text.endswith(".toml") else f"{text}.toml")
+                      for candidate_folder in folders]
+    for candidate in candidates:
+        if not (SCENARIO_NAME.fullmatch(candidate.stem) and candidate.suffix == ".toml"):
+            break
+        try:
+            real = candidate.resolve(strict=True)
+            if real.parent in folders and stat.S_ISREG(os.stat(real).st_mode):
+                return real
+        except (OSError, RuntimeError):  # missing, name too long, symlink loop
+            continue
+    known = ", ".join(available_scenarios())
+    where = f"; or a .toml file in {folder}" if folder is not None else ""
+    raise ConfigError(f"scenario: {shorten(repr(name), 80)} is not a scenario that may be loaded "
+                      f"over the network (shipped: {known}{where})")
+
+
 def load_scenario(name_or_path: str) -> Scenario:
     """Read and validate a scenario; ConfigError names the file and the problem."""
     path = scenario_path(name_or_path)
+    shown = shorten(str(path), 200)
     try:
         with open(path, "rb") as handle:
-            data = tomllib.load(handle)
+            if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+                raise ConfigError(f"{shown}: not a regular file")
+            raw = handle.read(MAX_SCENARIO_BYTES + 1)
+        if len(raw) > MAX_SCENARIO_BYTES:
+            raise ConfigError(f"{shown}: larger than {MAX_SCENARIO_BYTES} bytes, not a scenario")
+        data = tomllib.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         known = ", ".join(available_scenarios())
-        raise ConfigError(f"{path}: no such scenario file (shipped scenarios: {known})") from None
+        raise ConfigError(f"{shown}: no such scenario file (shipped scenarios: {known})") from None
     except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, not a scenario file") from None
+        raise ConfigError(f"{shown}: is a directory, not a scenario file") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{shown}: not UTF-8 text") from None
+    except RecursionError:  # tomllib recurses into nested arrays and inline tables
+        raise ConfigError(f"{shown}: nested too deeply") from None
     except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"{path}: not valid TOML ({error})") from None
+        raise ConfigError(f"{shown}: not valid TOML ({shorten(str(error), 200)})") from None
+    except OSError as error:  # e.g. a name too long, or no permission
+        raise ConfigError(f"{shown}: cannot read ({error.strerror or type(error).__name__})") from None
     return parse_scenario(data, str(path), path.stem)

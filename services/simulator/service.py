@@ -32,10 +32,12 @@ import zenoh
 
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message
-from balltrack.common.messages import MessageError, decode, encode, header
+from balltrack.common.config import ConfigError
+from balltrack.common.messages import MessageError, decode, encode, header, shorten
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
 from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
 
 LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
@@ -49,6 +51,13 @@ def image_message(rgb, head: dict, config: SimulatorConfig) -> dict:
                 "data": rgb.tobytes()}
     return bgr_to_message(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), head["stamp"], head["seq"],
                           head["frame_id"], config.encoding, config.jpeg_quality)
+
+
+def scenario_folder(configured: str):
+    """The folder whose scenario files ``sim/control`` may load by name besides the shipped
+    ones: that of the scenario file the simulator was started with (None for a shipped name)."""
+    folder = scenario_path(configured).resolve().parent
+    return None if folder == SCENARIO_DIR.resolve() else folder
 
 
 def build(service: ServiceContext):
@@ -90,19 +99,28 @@ def build(service: ServiceContext):
             except ValueError as error:
                 service.reject(service.keys(keys.CMD_VEL), str(error))
 
+    allowed_folder = scenario_folder(service.config.scenario)
+
     def on_control(query) -> None:
+        request = None
         try:
             request = decode("SimCommand", query.payload.to_bytes() if query.payload else b"")
+            if request["op"] == "reset" and request.get("scenario") is not None:
+                # Over the network a scenario is a name, never a path to read (see scenario.py).
+                request = {**request, "scenario": str(requested_scenario(request["scenario"],
+                                                                         allowed_folder))}
             with frame_lock:
                 # The queryable outlives the loop by a moment at shutdown (the runner undeclares it).
                 reply = ({"ok": False, "error": "the simulator is stopping"} if service.stop.is_set()
                          else simulation.handle_command(request))
-        except MessageError as error:
+        except (MessageError, ConfigError) as error:
             reply = {"ok": False, "error": str(error)}
+        except Exception as error:  # e.g. RecursionError formatting a 1,000-deep argument
+            reply = {"ok": False, "error": f"bad request ({type(error).__name__})"}
         if reply["ok"]:
-            service.log.info("sim/control: %s", request)
+            service.log.info("sim/control: %s", shorten(request, 300))
         else:
-            reply["error"] = reply["error"][:4000]
+            reply["error"] = shorten(reply["error"], 300)
             service.reject(service.keys(keys.SIM_CONTROL), reply["error"])
         query.reply(query.key_expr, encode("SimReply", reply))
 
