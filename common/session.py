@@ -78,6 +78,8 @@ def router_config(listen: list[str], connect: list[str] | None = None,
     _insert(config, "mode", "router")
     if not zenoh_config_file:
         _common_settings(config)
+        # Read-only admin space: `balltrack topic list` shows who publishes and subscribes.
+        _insert(config, "adminspace", {"enabled": True, "permissions": {"read": True, "write": False}})
         # Routers keep retrying their peers forever, so a cluster heals after a restart.
         _insert(config, "connect/timeout_ms", -1)
     if listen:

@@ -7,6 +7,12 @@
     balltrack echo detected_ball_3d --count 5
     balltrack hz camera/image_raw
     balltrack config detector v_min=30          # read or change parameters live
+    balltrack config dump detector > d.yaml     # save them (config load detector d.yaml)
+    balltrack topic list                        # live keys: type, publishers, subscribers, rate
+    balltrack topic info detected_ball_3d
+    balltrack pub cmd_vel '{linear: [0.1, 0, 0], angular: [0, 0, 0]}' [--rate 10]
+    balltrack bw camera/image_raw               # bandwidth
+    balltrack delay detected_ball_3d            # age of header stamps
     balltrack sim set_light diffuse=0.1         # drive the simulator
     balltrack detect photo1.jpg photo2.jpg      # the detector offline
     balltrack experiment range --quick --out runs/range
@@ -15,7 +21,7 @@
 import argparse
 import sys
 
-from balltrack.cli import network, offline, output, run, topics
+from balltrack.cli import config, introspect, network, offline, output, publish, run, topics
 from balltrack.common.keys import Keys
 from balltrack.common.session import ArgumentParser
 
@@ -43,7 +49,10 @@ def build_parser() -> ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
     run.register(commands)
     network.register(commands)
+    config.register(commands)
     topics.register(commands)
+    introspect.register(commands)
+    publish.register(commands)
     offline.register(commands)
     for name, (help_text, _) in DELEGATED.items():
         commands.add_parser(name, help=help_text, add_help=False)

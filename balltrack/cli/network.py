@@ -1,4 +1,4 @@
-"""Commands that talk to running services: router, status, config, sim."""
+"""Commands that talk to running services: router, status, sim."""
 
 import json
 import sys
@@ -47,34 +47,6 @@ def command_status(args) -> int:
     return 0
 
 
-def command_config(args) -> int:
-    try:
-        changes = parse_overrides(args.changes)
-    except ConfigError as error:
-        print(f"balltrack config: {error}", file=sys.stderr)
-        return 2
-    session = open_or_report(args)
-    if session is None:
-        return 1
-    names = Keys(args.namespace)
-    request = encode("ConfigRequest", {"set": changes} if changes else {})
-    replies = list(session.get(names(key_table.config_key(args.service)), payload=request,
-                               timeout=args.timeout))
-    session.close()
-    for reply in replies:
-        if reply.ok is None:
-            continue
-        answer = decode("ConfigReply", reply.ok.payload.to_bytes())
-        if not answer["ok"]:
-            print(f"balltrack config: {answer.get('error')}", file=sys.stderr)
-            return 2
-        print(json.dumps(answer["config"], indent=2))
-        return 0
-    print(f"balltrack config: no {args.service} answered on {names(key_table.config_key(args.service))}",
-          file=sys.stderr)
-    return 1
-
-
 def _argument_value(text: str):
     """``0.1`` -> 0.1, ``1.5,0.2`` or ``[1.5, 0.2]`` -> [1.5, 0.2], anything else -> the string."""
     try:
@@ -121,11 +93,6 @@ def register(commands) -> None:
     router.set_defaults(handler=command_router)
 
     networked(commands, "status", "which services are alive, with their stats", command_status)
-    config = networked(commands, "config", "read or change a service's parameters live",
-                       command_config)
-    config.add_argument("service", choices=key_table.SERVICES)
-    config.add_argument("changes", nargs="*", metavar="KEY=VALUE")
-
     sim = networked(commands, "sim", "control the simulator: reset, set_light, place_ball, "
                     "place_robot", command_sim)
     sim.add_argument("op", choices=SIM_OPS)

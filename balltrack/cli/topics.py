@@ -1,15 +1,19 @@
-"""Commands that watch keys, as ``ros2 topic`` does: echo, hz.
+"""Commands that watch keys, as ``ros2 topic`` does: echo, hz, bw, delay.
 
 Each works in a pipe (``balltrack echo detected_ball_3d | head -3`` prints three lines and exits
 0) and stops within a second on SIGINT or SIGTERM.
 """
 
 import json
+import statistics
 import threading
 import time
 
+import msgpack
+
 from balltrack.cli.output import Output, silence_closed_stdout
 from balltrack.cli.session import networked, open_or_report
+from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, decode
 from balltrack.common.shutdown import stop_on_signals
@@ -28,7 +32,7 @@ def printable(value):
     return value
 
 
-def _watch(args, on_sample, report=None, period: float = POLL_SECONDS) -> int:
+def _watch(args, on_sample, report=None, period: float = POLL_SECONDS, on_open=None) -> int:
     """Subscribe to ``args.key`` until stopped; ``report()`` runs every ``period`` seconds."""
     stop = stop_on_signals()
     session = open_or_report(args)
@@ -36,6 +40,8 @@ def _watch(args, on_sample, report=None, period: float = POLL_SECONDS) -> int:
         return 1
     out = Output(stop)
     try:
+        if on_open is not None:
+            on_open(session)
         subscriber = session.declare_subscriber(Keys(args.namespace)(args.key),
                                                 lambda sample: on_sample(sample, out))
         while not stop.wait(period):
@@ -68,27 +74,114 @@ def command_echo(args) -> int:
 
 
 def command_hz(args) -> int:
-    arrivals: list[float] = []
-    lock = threading.Lock()
-    reports = [0]
     key = Keys(args.namespace)(args.key)
+    window = Window(args.window)
 
-    def on_sample(_sample, _out):
-        with lock:
-            arrivals.append(time.monotonic())
+    def describe(items):
+        arrivals = [arrival for arrival, _ in items]
+        rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) if len(arrivals) > 1 else 0.0
+        return f"{key}: {rate:.2f} Hz ({len(arrivals)} messages in {args.window:.1f} s)"
 
-    def report(out: Output):
+    report = _reporter(args, describe)
+    return _watch(args, lambda _sample, _out: window.add(0.0), lambda out: report(out, window),
+                  period=args.window)
+
+
+class Window:
+    """Per-sample figures of the last ``seconds``, reported and forgotten each period."""
+
+    def __init__(self, seconds: float):
+        self.seconds = seconds
+        self._items: list[tuple[float, float]] = []
+        self._lock = threading.Lock()
+
+    def add(self, value: float) -> None:
+        with self._lock:
+            self._items.append((time.monotonic(), value))
+
+    def take(self) -> list[tuple[float, float]]:
         now = time.monotonic()
-        with lock:
-            recent = [t for t in arrivals if t >= now - args.window]
-            arrivals[:] = recent
-        rate = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 else 0.0
-        out.line(f"{key}: {rate:.2f} Hz ({len(recent)} messages in {args.window:.1f} s)")
+        with self._lock:
+            recent = [item for item in self._items if item[0] >= now - self.seconds]
+            self._items = []
+        return recent
+
+
+def _reporter(args, describe):
+    """A ``report`` for _watch that prints ``describe(window items)`` and honours --count."""
+    reports = [0]
+
+    def report(out: Output, window: Window):
+        out.line(describe(window.take()))
         reports[0] += 1
         if args.count and reports[0] >= args.count:
             out.stop.set()
+    return report
 
-    return _watch(args, on_sample, report, period=args.window)
+
+def command_bw(args) -> int:
+    key = Keys(args.namespace)(args.key)
+    window = Window(args.window)
+
+    def describe(items):
+        sizes = [size for _, size in items]
+        if not sizes:
+            return f"{key}: no messages in {args.window:.1f} s"
+        return (f"{key}: {sum(sizes) / args.window / 1e3:.1f} kB/s, mean {statistics.fmean(sizes):.0f} B, "
+                f"min {min(sizes):.0f} B, max {max(sizes):.0f} B ({len(sizes)} messages)")
+
+    report = _reporter(args, describe)
+    return _watch(args, lambda sample, _out: window.add(len(sample.payload)),
+                  lambda out: report(out, window), period=args.window)
+
+
+def header_stamp(payload: bytes) -> int | None:
+    """The header stamp (ns) of any balltrack data message, or None."""
+    try:
+        message = msgpack.unpackb(payload, raw=False, max_array_len=1 << 16, max_map_len=1 << 12)
+    except Exception:  # any malformed payload simply has no stamp
+        return None
+    if not isinstance(message, dict):
+        return None
+    head = message.get("header")
+    stamp = head.get("stamp") if isinstance(head, dict) else message.get("stamp")
+    return stamp if isinstance(stamp, int) and not isinstance(stamp, bool) else None
+
+
+def command_delay(args) -> int:
+    keys = Keys(args.namespace)
+    key = keys(args.key)
+    window = Window(args.window)
+    sim_now = [None]  # the newest `clock` stamp, with --use-sim-time
+    clock_subscription = []
+
+    def now_ns() -> int | None:
+        return sim_now[0] if args.use_sim_time else time.time_ns()
+
+    def on_sample(sample, _out):
+        stamp = header_stamp(sample.payload.to_bytes())
+        now = now_ns()
+        if stamp is not None and now is not None:
+            window.add((now - stamp) / 1e6)
+
+    def describe(items):
+        delays = [delay for _, delay in items]
+        if not delays:
+            return f"{key}: no stamped messages in {args.window:.1f} s"
+        return (f"{key}: delay mean {statistics.fmean(delays):.2f} ms, min {min(delays):.2f}, "
+                f"max {max(delays):.2f}, std {statistics.pstdev(delays):.2f} ({len(delays)} messages)")
+
+    report = _reporter(args, describe)
+
+    def start_clock(session):
+        def on_clock(sample):
+            stamp = header_stamp(sample.payload.to_bytes())
+            if stamp is not None:
+                sim_now[0] = stamp
+        clock_subscription.append(session.declare_subscriber(keys(key_table.CLOCK), on_clock))
+
+    return _watch(args, on_sample, lambda out: report(out, window), period=args.window,
+                  on_open=start_clock if args.use_sim_time else None)
 
 
 def register(commands) -> None:
@@ -101,3 +194,13 @@ def register(commands) -> None:
     hz.add_argument("key")
     hz.add_argument("--window", type=float, default=2.0, help="seconds per report")
     hz.add_argument("--count", type=int, default=0, help="stop after N reports")
+    for name, help_text, handler in (("bw", "measure a key's bandwidth, as ros2 topic bw", command_bw),
+                                     ("delay", "age of a key's header stamps, as ros2 topic delay",
+                                      command_delay)):
+        sub = networked(commands, name, help_text, handler)
+        sub.add_argument("key")
+        sub.add_argument("--window", type=float, default=2.0, help="seconds per report")
+        sub.add_argument("--count", type=int, default=0, help="stop after N reports")
+        if name == "delay":
+            sub.add_argument("--use-sim-time", action="store_true",
+                             help="compare with the newest `clock` message (simulated stamps)")

@@ -1,0 +1,102 @@
+"""``balltrack config``: a running service's parameters, read, changed, saved and restored.
+
+    balltrack config detector                    # read (JSON)
+    balltrack config detector v_min=30 param2=18 # change live (all or nothing)
+    balltrack config dump detector > detector.yaml
+    balltrack config load detector detector.yaml # the same file works as --config for a start
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import yaml
+
+from balltrack.cli.session import networked, open_or_report
+from balltrack.common import keys as key_table
+from balltrack.common.config import ConfigError, parse_overrides
+from balltrack.common.keys import Keys
+from balltrack.common.messages import MessageError, decode, encode, shorten
+
+ACTIONS = ("dump", "load")
+
+
+def ask(args, service: str, request: dict) -> tuple[int, dict | None]:
+    """(exit status, the ConfigReply's config) after one ConfigRequest to ``service``."""
+    session = open_or_report(args)
+    if session is None:
+        return 1, None
+    key = Keys(args.namespace)(key_table.config_key(service))
+    try:
+        replies = list(session.get(key, payload=encode("ConfigRequest", request), timeout=args.timeout))
+    finally:
+        session.close()
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        try:
+            answer = decode("ConfigReply", reply.ok.payload.to_bytes())
+        except MessageError as error:
+            print(f"balltrack config: {service} answered badly: {error}", file=sys.stderr)
+            return 1, None
+        if not answer["ok"]:
+            print(f"balltrack config: {answer.get('error')}", file=sys.stderr)
+            return 2, None
+        return 0, answer["config"]
+    print(f"balltrack config: no {service} answered on {key}", file=sys.stderr)
+    return 1, None
+
+
+def _read_file(path: str, service: str) -> dict:
+    """A YAML (or JSON) map of parameters; a ``service:`` section is accepted as in TOML files."""
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except OSError as error:
+        raise ConfigError(f"{path}: {error.strerror}") from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{path}: not YAML ({shorten(str(error).splitlines()[0], 100)})") from None
+    if isinstance(data, dict) and isinstance(data.get(service), dict):
+        data = data[service]
+    if not isinstance(data, dict) or not data:
+        raise ConfigError(f"{path}: expected a map of parameter names to values")
+    return data
+
+
+def command_config(args) -> int:
+    words = [args.target, *args.rest]
+    action = words[0] if words[0] in ACTIONS else None
+    operands = words[1:] if action else words
+    service = operands[0] if operands else None
+    expected = {"dump": 1, "load": 2}.get(action)
+    if service not in key_table.SERVICES or (expected and len(operands) != expected):
+        usage = {"dump": "dump SERVICE", "load": "load SERVICE FILE"}.get(action, "SERVICE [KEY=VALUE...]")
+        print(f"balltrack config: expected {usage}, with SERVICE one of {', '.join(key_table.SERVICES)}",
+              file=sys.stderr)
+        return 2
+    try:
+        if action == "load":
+            changes = _read_file(operands[1], service)
+        else:
+            changes = parse_overrides(operands[1:]) if action is None else {}
+    except ConfigError as error:
+        print(f"balltrack config: {error}", file=sys.stderr)
+        return 2
+    status, config = ask(args, service, {"set": changes} if changes else {})
+    if config is None:
+        return status
+    if action == "dump":
+        sys.stdout.write(f"# balltrack config dump {service}: load with `balltrack config load "
+                         f"{service} FILE` or start with --config (as TOML)\n")
+        sys.stdout.write(yaml.safe_dump(config, sort_keys=False))
+    elif action == "load":
+        print(f"{service}: {len(changes)} parameters loaded", file=sys.stderr)
+    else:
+        print(json.dumps(config, indent=2))
+    return 0
+
+
+def register(commands) -> None:
+    config = networked(commands, "config", "read, change, dump or load a service's parameters live",
+                       command_config)
+    config.add_argument("target", metavar="SERVICE|dump|load")
+    config.add_argument("rest", nargs="*", metavar="KEY=VALUE | SERVICE [FILE]")

@@ -1,0 +1,165 @@
+"""``balltrack topic list`` and ``balltrack topic info KEY``: what is live on the network.
+
+Who publishes and subscribes comes from the router's admin space (read-only; balltrack's
+routers enable it), where every declared publisher, subscriber and liveliness token is listed
+with the Zenoh ids of the sessions that declared it; a session that declared ``alive/<service>``
+is shown by that service's name. Rates are measured by listening for ``--window`` seconds.
+"""
+
+import json
+import threading
+import time
+from collections import defaultdict
+
+from balltrack.cli.output import Output, silence_closed_stdout
+from balltrack.cli.session import networked, open_or_report
+from balltrack.common import keys as key_table
+from balltrack.common.keys import Keys
+from balltrack.common.shutdown import stop_on_signals
+
+ADMIN_KINDS = ("publisher", "subscriber", "token")
+
+
+class Graph:
+    """Declared publishers and subscribers per key, by name where a token tells it."""
+
+    def __init__(self):
+        self.declared = {kind: defaultdict(set) for kind in ADMIN_KINDS}  # kind -> key -> zids
+        self.readable = False
+
+    @classmethod
+    def query(cls, session, timeout: float) -> "Graph":
+        graph = cls()
+        for reply in session.get("@/*/router/**", timeout=timeout):
+            if reply.ok is None:
+                continue
+            parts = str(reply.ok.key_expr).split("/")
+            graph.readable = True
+            if len(parts) < 5 or parts[2] != "router" or parts[3] not in ADMIN_KINDS:
+                continue
+            try:
+                holders = json.loads(reply.ok.payload.to_bytes())
+            except ValueError:
+                continue
+            zids = {zid for group in ("routers", "peers", "clients") for zid in holders.get(group, [])}
+            graph.declared[parts[3]]["/".join(parts[4:])] |= zids
+        return graph
+
+    def names(self, keys: Keys) -> dict[str, str]:
+        """Zenoh id -> service name, from the ``alive/<service>`` tokens."""
+        result = {}
+        for key, zids in self.declared["token"].items():
+            stripped = keys.strip(key)
+            if stripped.startswith("alive/"):
+                result.update({zid: stripped.split("/", 1)[1] for zid in zids})
+        return result
+
+    def who(self, kind: str, full_key: str, keys: Keys) -> list[str]:
+        names = self.names(keys)
+        return sorted(names.get(zid, zid[:8]) for zid in self.declared[kind].get(full_key, ()))
+
+    def keys(self, kind: str) -> set[str]:
+        return set(self.declared[kind])
+
+
+def _listen(session, expression: str, window: float, stop) -> dict[str, list[tuple[float, int]]]:
+    """(arrival time, size) of every sample per key, for ``window`` seconds."""
+    arrivals: dict[str, list[tuple[float, int]]] = defaultdict(list)
+    lock = threading.Lock()
+
+    def on_sample(sample):
+        with lock:
+            arrivals[str(sample.key_expr)].append((time.monotonic(), len(sample.payload)))
+
+    subscriber = session.declare_subscriber(expression, on_sample)
+    stop.wait(window)
+    subscriber.undeclare()
+    with lock:
+        return dict(arrivals)
+
+
+def rate(samples: list[tuple[float, int]]) -> float:
+    if len(samples) < 2 or samples[-1][0] <= samples[0][0]:
+        return 0.0
+    return (len(samples) - 1) / (samples[-1][0] - samples[0][0])
+
+
+def _message_type(keys: Keys, full_key: str) -> str:
+    return keys.message_of(full_key) or "-"
+
+
+def _snapshot(args):
+    stop = stop_on_signals()
+    session = open_or_report(args)
+    if session is None:
+        return None
+    keys = Keys(args.namespace)
+    try:
+        graph = Graph.query(session, args.timeout)
+        traffic = _listen(session, keys("**"), args.window, stop)
+    finally:
+        session.close()
+    return keys, graph, traffic
+
+
+def command_topic_list(args) -> int:
+    snapshot = _snapshot(args)
+    if snapshot is None:
+        return 1
+    keys, graph, traffic = snapshot
+    live = {key for key in graph.keys("publisher") | set(traffic)
+            if not key.startswith("@") and (not keys.namespace or key.startswith(keys.namespace + "/"))}
+    out = Output(stop_on_signals())
+    if not graph.readable:
+        out.line("# the router's admin space is not readable: publishers and subscribers unknown")
+    out.line(f"{'key':<28} {'type':<12} {'rate_hz':>8} {'publishers':<24} subscribers")
+    for key in sorted(live):
+        publishers = ",".join(graph.who("publisher", key, keys)) or "-"
+        subscribers = ",".join(graph.who("subscriber", key, keys)) or "-"
+        if not out.line(f"{keys.strip(key):<28} {_message_type(keys, key):<12} "
+                        f"{rate(traffic.get(key, [])):>8.2f} {publishers:<24} {subscribers}"):
+            break
+    if out.closed:
+        silence_closed_stdout()
+    return 0
+
+
+def command_topic_info(args) -> int:
+    snapshot = _snapshot(args)
+    if snapshot is None:
+        return 1
+    keys, graph, traffic = snapshot
+    full_key = keys(args.key)
+    samples = traffic.get(full_key, [])
+    spec = next((spec for spec in key_table.TABLE if spec.key == args.key), None)
+    sizes = [size for _, size in samples]
+    info = {
+        "key": full_key,
+        "type": _message_type(keys, full_key),
+        "declared_publisher": spec.publisher if spec else None,
+        "when": spec.when if spec else None,
+        "publishers": graph.who("publisher", full_key, keys) if graph.readable else None,
+        "subscribers": graph.who("subscriber", full_key, keys) if graph.readable else None,
+        "rate_hz": round(rate(samples), 3),
+        "messages_seen": len(samples),
+        "mean_bytes": round(sum(sizes) / len(sizes), 1) if sizes else None,
+        "window_s": args.window,
+    }
+    print(json.dumps(info, indent=2))
+    return 0
+
+
+def register(commands) -> None:
+    topic = commands.add_parser("topic", help="live keys: list, info KEY (as ros2 topic)")
+    actions = topic.add_subparsers(dest="action", required=True, parser_class=type(topic))
+
+    def window(sub):
+        sub.add_argument("--window", type=float, default=1.0,
+                         help="seconds to listen for rates (default 1)")
+        return sub
+
+    window(networked(actions, "list", "live keys with message type, publishers, subscribers, rate",
+                     command_topic_list))
+    info = window(networked(actions, "info", "one key: type, publishers, subscribers, rate, size",
+                            command_topic_info))
+    info.add_argument("key")
