@@ -1,0 +1,137 @@
+"""Candidate checks (services/detector/checks.py): measurements on drawn masks, and judging."""
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from balltrack.services.detector.checks import (CORNER_SPREAD, NO_COLOUR, CandidateMetrics,
+                                                ColourMetrics, MaskMetrics, colour_stats,
+                                                edge_spread, hue_in_range, judge, mean_hue,
+                                                measure_mask)
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import Candidate, disc
+from balltrack.services.detector.mask import EXPLAINED, ColourMasker
+from tests.unit.detector.drawing import TENNIS_BGR, scene
+
+SHAPE = (240, 320)
+GOOD_MASK = MaskMetrics(visible=1.0, support=0.95, leak=0.02, fill=0.97, outside=0.01, spread=0.02)
+GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0)
+
+
+def test_a_clean_disc_measures_as_a_ball():
+    x, y, radius = 160.3, 120.6, 25.0
+    metrics = measure_mask(Candidate(x, y, radius), disc(SHAPE, x, y, radius))
+    assert metrics.visible == 1.0
+    assert metrics.support == 1.0 and metrics.leak == 0.0
+    assert metrics.fill == 1.0 and metrics.outside == 0.0
+    assert metrics.spread < 0.03
+    assert CandidateMetrics(metrics, GOOD_COLOUR, size=5.0).clean
+
+
+def test_a_circle_inside_a_large_area_leaks_everywhere():
+    mask = np.full(SHAPE, 255, np.uint8)
+    metrics = measure_mask(Candidate(160.0, 120.0, 20.0), mask)
+    assert metrics.fill == 1.0 and metrics.outside == 1.0
+    assert metrics.leak == 1.0 and metrics.support == 0.0
+    assert not CandidateMetrics(metrics, GOOD_COLOUR, size=4.0).clean
+
+
+def test_a_disc_cut_by_the_frame_edge_shows_part_of_its_rim():
+    x, y, radius = 10.0, 120.0, 30.0
+    metrics = measure_mask(Candidate(x, y, radius), disc(SHAPE, x, y, radius))
+    # the rim samples left of x = 0 (inner or outer point) are out of the frame
+    assert 0.4 < metrics.visible < 0.7
+    assert metrics.support == 1.0 and metrics.fill == 1.0
+
+
+def test_explained_pixels_are_neither_mask_nor_not():
+    x, y, radius = 120.0, 120.0, 20.0
+    mask = disc(SHAPE, x, y, radius) | disc(SHAPE, x + 36.0, y, 16.0)  # a touching neighbour
+    candidate = Candidate(x, y, radius)
+    touching = measure_mask(candidate, mask)
+    assert touching.leak > 0.05 and touching.outside > 0.05
+    explained = mask.copy()
+    cv2.circle(explained, (156, 120), 18, EXPLAINED, -1)
+    cleared = measure_mask(candidate, explained)
+    assert cleared.visible < 1.0 and cleared.leak < 0.02 and cleared.outside == 0.0
+    everything = np.full(SHAPE, EXPLAINED, np.uint8)
+    assert measure_mask(candidate, everything) is None
+
+
+def test_a_square_has_corners():
+    square = np.zeros(SHAPE, np.uint8)
+    square[80:160, 120:200] = 255
+    candidate = Candidate(159.5, 119.5, 45.0)  # about the square's own circle
+    assert edge_spread(159.5, 119.5, 45.0, square, 96) > CORNER_SPREAD
+    assert edge_spread(160.0, 120.0, 40.0, disc(SHAPE, 160.0, 120.0, 40.0), 96) < 0.03
+    metrics = measure_mask(candidate, square)
+    assert metrics.spread > CORNER_SPREAD
+    # too few rays with an edge: nothing to measure the spread on
+    assert edge_spread(160.0, 120.0, 40.0, np.zeros(SHAPE, np.uint8), 96) == 0.0
+
+
+@pytest.mark.parametrize("bgr, hue", [((0, 0, 255), 0.0), ((0, 255, 255), 30.0), ((0, 255, 0), 60.0),
+                                      ((255, 0, 0), 120.0), ((255, 0, 255), 150.0),
+                                      ((40, 40, 40), -1.0)])
+def test_mean_hue_is_opencvs_hue(bgr, hue):
+    assert mean_hue(bgr) == pytest.approx(hue)
+    if hue >= 0:
+        pixel = cv2.cvtColor(np.array([[bgr]], np.uint8), cv2.COLOR_BGR2HSV)[0, 0, 0]
+        assert abs(float(pixel) - hue) <= 0.5
+
+
+def test_hue_in_range_with_and_without_wrapping():
+    config = DetectorConfig()  # 25-50
+    assert hue_in_range(36.0, config) and hue_in_range(24.6, config) and hue_in_range(50.5, config)
+    assert not hue_in_range(24.0, config) and not hue_in_range(-1.0, config)
+    red = DetectorConfig(h_min=170, h_max=8)
+    assert hue_in_range(175.0, red) and hue_in_range(3.0, red) and not hue_in_range(30.0, red)
+
+
+def test_colour_stats_of_a_ball_and_of_no_colour():
+    image = scene([(160.0, 120.0, 25.0)], width=320, height=240)
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    colour = colour_stats(Candidate(160.0, 120.0, 25.0), planes)
+    assert colour.colourfulness > DetectorConfig().min_colourfulness
+    assert abs(colour.mean_hue - mean_hue(TENNIS_BGR)) < 3.0
+    assert colour.mean_chroma > 100
+    assert colour_stats(Candidate(40.0, 40.0, 15.0), planes) == NO_COLOUR  # no mask there
+    assert colour_stats(Candidate(-100.0, -100.0, 10.0), planes) == NO_COLOUR  # off the frame
+
+
+def test_judge_scores_a_ball():
+    config = DetectorConfig()
+    metrics = CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=3.0)
+    clutter = GOOD_MASK.leak + GOOD_MASK.outside
+    assert judge(metrics, config) == pytest.approx((GOOD_MASK.fill + GOOD_MASK.support - clutter) / 2)
+
+
+@pytest.mark.parametrize("mask_changes, colour_changes, size", [
+    ({"visible": 0.2}, {}, 3.0),                       # too little rim in view
+    ({"visible": 0.9}, {}, 0.8),                       # a small ball must be whole
+    ({"fill": 0.5}, {}, 3.0),                          # a ring, not a disc
+    ({"support": 0.45, "leak": 0.1}, {}, 3.0),        # clutter asks for more rim support
+    ({"outside": 0.35}, {}, 3.0),                      # in a large area of colour
+    ({}, {"colourfulness": 0.2}, 3.0),                 # dull
+    ({}, {"mean_chroma": 3.0, "mean_hue": 15.0}, 3.0),  # dim, and the mean colour is orange
+    ({"spread": 0.1, "leak": 0.1, "support": 0.99}, {}, 3.0),  # corners
+    ({"fill": 0.56, "support": 0.46}, {}, 3.0),        # each check passed, but below min_score
+])
+def test_judge_rejects(mask_changes, colour_changes, size):
+    metrics = CandidateMetrics(dataclasses.replace(GOOD_MASK, **mask_changes),
+                               dataclasses.replace(GOOD_COLOUR, **colour_changes), size=size)
+    assert judge(metrics, DetectorConfig()) is None
+
+
+def test_judge_accepts_what_the_rejections_border_on():
+    config = DetectorConfig()
+    # a dim ball whose mean colour has the target's hue
+    dim = CandidateMetrics(GOOD_MASK, dataclasses.replace(GOOD_COLOUR, mean_chroma=3.0), size=3.0)
+    assert judge(dim, config) is not None
+    # an uneven edge without leaks (a touching neighbour) is not a corner
+    uneven = CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.1), GOOD_COLOUR, size=3.0)
+    assert judge(uneven, config) is not None
+    # a whole small ball
+    assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None

@@ -1,0 +1,128 @@
+"""The colour mask stage (services/detector/mask.py) on synthetic frames."""
+
+import math
+
+import numpy as np
+import pytest
+
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.mask import (ColourMasker, check_image, ellipse_kernel, frame_gain,
+                                              reference_level)
+from tests.unit.detector.drawing import coverage, draw_ball, floor, pitch_dark_frame, scene, to_uint8
+
+
+def test_check_image_accepts_bgr_and_grey_and_rejects_the_rest():
+    bgr = np.zeros((20, 30, 3), np.uint8)
+    assert check_image(bgr) is bgr
+    grey = np.full((20, 30), 7, np.uint8)
+    expanded = check_image(grey)
+    assert expanded.shape == (20, 30, 3) and (expanded == 7).all()
+    assert check_image(grey[:, :, None]).shape == (20, 30, 3)
+    with pytest.raises(ValueError, match="uint8"):
+        check_image(np.zeros((20, 30, 3), np.float32))
+    with pytest.raises(ValueError, match="uint8"):
+        check_image([[0, 0, 0]])
+    with pytest.raises(ValueError, match="HxWx3"):
+        check_image(np.zeros((20, 30, 4), np.uint8))
+    with pytest.raises(ValueError, match="too small"):
+        check_image(np.zeros((7, 30, 3), np.uint8))
+
+
+def test_reference_level_is_the_bright_level_capped_by_the_median():
+    assert reference_level(np.full((64, 64, 3), 50, np.uint8)) == 50.0
+    assert reference_level(np.zeros((64, 64, 3), np.uint8)) == 1.0  # never below 1
+    # V is the brightest channel: a pure blue frame has the level of its blue
+    blue = np.zeros((64, 64, 3), np.uint8)
+    blue[..., 0] = 90
+    assert reference_level(blue) == 90.0
+    # a bright sky over a third of a dark floor: the level is at most 3x the median (the floor)
+    sky = np.full((120, 64, 3), 10, np.uint8)
+    sky[:40] = 200
+    assert reference_level(sky) == 30.0
+
+
+def test_frame_gain_brings_dark_frames_to_the_target():
+    config = DetectorConfig()  # gain_target 100, max_gain 64
+    assert frame_gain(200.0, config) == 1.0      # bright frames are not darkened
+    assert frame_gain(25.0, config) == pytest.approx(4.0)
+    assert frame_gain(1.0, config) == 64.0       # at most max_gain
+    assert frame_gain(1.0, DetectorConfig(max_gain=1.0)) == 1.0  # off
+
+
+def test_ellipse_kernel():
+    assert ellipse_kernel(0) is None and ellipse_kernel(1) is None
+    kernel = ellipse_kernel(5)
+    assert kernel.shape == (5, 5) and kernel[2, 2] == 1 and kernel[0, 0] == 0
+
+
+def test_mask_covers_the_ball_and_nothing_else():
+    u, v, radius = 200.3, 150.6, 20.0
+    planes = ColourMasker(DetectorConfig()).planes(scene([(u, v, radius)]))
+    assert planes.mask.dtype == np.uint8 and set(np.unique(planes.mask)) == {0, 255}
+    assert planes.gain == 1.0 and not planes.dark
+    ys, xs = np.nonzero(planes.mask)
+    # the mask's blob is the disc, spread by the blur by about a pixel at most
+    distance = np.hypot(xs - u, ys - v)
+    assert distance.max() <= radius + 2.0
+    area = np.count_nonzero(planes.mask)
+    assert math.pi * (radius - 1) ** 2 <= area <= math.pi * (radius + 1.5) ** 2
+    # the chroma plane is max - min channel: high on the felt, low on the grey floor
+    assert planes.chroma[int(v), int(u)] > 100 and planes.chroma[20, 20] < 20
+
+
+def test_other_hues_are_not_in_the_mask():
+    image = to_uint8(draw_ball(floor(), 320.0, 240.0, 30.0, colour=(30, 120, 240)))  # orange
+    assert np.count_nonzero(ColourMasker(DetectorConfig()).planes(image).mask) == 0
+
+
+def test_a_hue_range_through_zero():
+    image = to_uint8(draw_ball(floor(), 320.0, 240.0, 30.0, colour=(30, 30, 210)))  # red
+    assert np.count_nonzero(ColourMasker(DetectorConfig()).planes(image).mask) == 0
+    red = ColourMasker(DetectorConfig(h_min=170, h_max=8)).planes(image).mask
+    assert red[240, 320] == 255 and red[20, 20] == 0
+
+
+def test_opening_removes_specks():
+    image = to_uint8(floor())
+    image[100:102, 100:102] = (40, 225, 190)  # 2x2 pixels of felt
+    assert np.count_nonzero(ColourMasker(DetectorConfig(blur_kernel=1)).planes(image).mask) == 0
+    kept = ColourMasker(DetectorConfig(blur_kernel=1, open_kernel=0)).planes(image).mask
+    assert kept[100, 100] == 255
+
+
+def test_dark_frames_are_gained_before_the_colour_test():
+    u, v, radius = 300.5, 260.5, 25.0
+    image = scene([(u, v, radius)], brightness=0.05)
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    assert 10.0 < planes.gain < 32.0 and not planes.dark
+    # the gained frame is the input scaled by the gain; the reference is on that scale
+    assert abs(int(planes.frame[20, 20, 1]) - image[20, 20, 1] * planes.gain) <= 1
+    assert planes.reference == pytest.approx(min(255.0, reference_level(image) * planes.gain))
+    inside = coverage(image.shape, u, v, radius - 2) > 0.99
+    assert np.count_nonzero(planes.mask[inside]) > 0.95 * np.count_nonzero(inside)
+    # without the gain the colour of the dark ball is rounding noise
+    assert np.count_nonzero(ColourMasker(DetectorConfig(max_gain=1.0)).planes(image).mask[inside]) \
+        < 0.5 * np.count_nonzero(inside)
+
+
+def test_extremely_dark_frames_use_wider_averages():
+    image = pitch_dark_frame(balls=[(300.4, 280.7, 20.0)])
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    assert planes.dark and planes.gain >= DetectorConfig().dark_gain
+    # the lit cap (upper half) is found, the black lower side is not
+    assert planes.mask[270, 300] == 255
+    assert planes.mask[297, 300] == 0
+    off = ColourMasker(DetectorConfig(dark_gain=0.0)).planes(image)
+    assert not off.dark
+
+
+def test_equalise_is_identity_without_clahe():
+    value = np.random.default_rng(0).integers(0, 256, (100, 120), dtype=np.uint8)
+    assert ColourMasker(DetectorConfig(clahe_clip_limit=0.0)).equalise(value) is value
+    equalised = ColourMasker(DetectorConfig()).equalise(value)
+    assert equalised.shape == value.shape and equalised.dtype == np.uint8
+    wide = np.tile(np.linspace(20, 60, 640, dtype=np.uint8), (480, 1))
+    stretched = ColourMasker(DetectorConfig()).equalise(wide)
+    assert stretched.shape == wide.shape
+    # local equalisation spreads a narrow range of brightness
+    assert int(stretched.max()) - int(stretched.min()) > int(wide.max()) - int(wide.min())

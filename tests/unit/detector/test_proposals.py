@@ -1,0 +1,122 @@
+"""Proposals (services/detector/proposals.py): blobs and Hough circles on drawn masks."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import Candidate, disc
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
+from balltrack.services.detector.proposals import (HOUGH_CIRCLES_PER_BLOB, blob_proposals,
+                                                   boundary_points, frame_search, hough_proposals,
+                                                   leftover_blobs, mask_blobs)
+
+SHAPE = (240, 320)
+
+
+def planes_of(mask, chroma_level=180):
+    """Colour planes of a drawn mask: vivid colour where the mask is, grey elsewhere."""
+    chroma = np.where(mask == 255, chroma_level, 5).astype(np.uint8)
+    frame = np.full(mask.shape + (3,), 120, np.uint8)
+    return ColourPlanes(mask=mask, frame=frame, gain=1.0, chroma=chroma, reference=250.0)
+
+
+def search_of(mask, config=None, chroma_level=180):
+    return frame_search(planes_of(mask, chroma_level), config or DetectorConfig(), 1.0)
+
+
+def test_mask_blobs_one_contour_per_blob():
+    mask = disc(SHAPE, 60.0, 60.0, 15.0) | disc(SHAPE, 200.0, 120.0, 25.0)
+    blobs = mask_blobs(mask)
+    assert len(blobs) == 2
+    assert sorted(cv2.boundingRect(blob)[2] for blob in blobs) == pytest.approx([31, 51], abs=2)
+    assert mask_blobs(np.zeros(SHAPE, np.uint8)) == []
+
+
+def test_boundary_points_lie_on_the_rim_in_row_order_without_the_frame_border():
+    x, y, radius = 150.5, 110.2, 30.0
+    boundary_x, boundary_y = boundary_points(disc(SHAPE, x, y, radius))
+    distance = np.hypot(boundary_x - x, boundary_y - y)
+    assert boundary_x.dtype == np.float64 and boundary_x.size > 150
+    # (pixel centres of a rasterised rim: within a pixel of the circle)
+    assert (distance > radius - 1.5).all() and (distance < radius + 1.0).all()
+    assert (np.diff(boundary_y) >= 0).all()
+    # a disc cut by the top edge: no boundary pixel on row 0
+    boundary_x, boundary_y = boundary_points(disc(SHAPE, 100.0, 5.0, 20.0))
+    assert boundary_y.min() >= 1
+    assert boundary_points(np.zeros(SHAPE, np.uint8))[0].size == 0
+
+
+def test_frame_search_radius_limits():
+    mask = np.zeros(SHAPE, np.uint8)
+    search = search_of(mask)
+    assert search.min_radius == 3.0 and search.max_radius == 120.0  # half the shorter side
+    assert search.small_radius == 5.0
+    scaled = frame_search(planes_of(mask), DetectorConfig(min_radius=4, max_radius=50), 0.5)
+    assert (scaled.min_radius, scaled.max_radius, scaled.small_radius, scaled.scale) == (2.0, 25.0, 2.5, 0.5)
+
+
+def test_a_round_blob_proposes_its_enclosing_circle():
+    x, y, radius = 160.4, 120.3, 22.0
+    mask = disc(SHAPE, x, y, radius)
+    [blob] = mask_blobs(mask)
+    [proposal] = blob_proposals(blob, search_of(mask), mask, DetectorConfig())
+    assert math.hypot(proposal.x - x, proposal.y - y) < 1.0
+    assert abs(proposal.radius - radius) < 1.5
+
+
+def test_elongated_blobs_propose_nothing_but_are_kept_for_hough():
+    mask = np.zeros(SHAPE, np.uint8)
+    mask[100:112, 40:240] = 255  # a bar
+    [blob] = mask_blobs(mask)
+    assert blob_proposals(blob, search_of(mask), mask, DetectorConfig()) == []
+
+
+def test_blobs_that_cannot_hold_a_ball_are_dropped():
+    config = DetectorConfig()
+    tiny = disc(SHAPE, 100.0, 100.0, 1.2)
+    assert blob_proposals(mask_blobs(tiny)[0], search_of(tiny), tiny, config) is None
+    huge = np.full(SHAPE, 255, np.uint8)
+    huge[0, :] = 0
+    small_limit = search_of(huge, DetectorConfig(max_radius=20))
+    assert blob_proposals(mask_blobs(huge)[0], small_limit, huge, config) is None
+    # a dull blob (leaves in shade): its mean chroma is below 0.7 min_colourfulness
+    dull = disc(SHAPE, 100.0, 100.0, 20.0)
+    dull_search = search_of(dull, chroma_level=int(0.6 * config.min_colourfulness * 250))
+    assert blob_proposals(mask_blobs(dull)[0], dull_search, dull, config) is None
+
+
+def test_hough_splits_touching_balls():
+    first, second = (120.0, 120.0, 28.0), (120.0 + 28.0 + 20.0, 125.0, 20.0)
+    mask = disc(SHAPE, *first) | disc(SHAPE, *second)
+    [blob] = mask_blobs(mask)
+    proposals = hough_proposals(cv2.boundingRect(blob), search_of(mask), DetectorConfig())
+    assert 2 <= len(proposals) <= HOUGH_CIRCLES_PER_BLOB
+    for x, y, radius in (first, second):
+        nearest = min(proposals, key=lambda p: math.hypot(p.x - x, p.y - y))
+        assert math.hypot(nearest.x - x, nearest.y - y) < 3.0
+        assert abs(nearest.radius - radius) < 4.0
+    # no two proposals are variants of one circle
+    for index, one in enumerate(proposals):
+        for other in proposals[index + 1:]:
+            assert math.hypot(one.x - other.x, one.y - other.y) >= 0.5 * max(one.radius, other.radius)
+
+
+def test_hough_skips_boxes_too_small_for_a_ball():
+    mask = disc(SHAPE, 100.0, 100.0, 3.0)
+    assert hough_proposals((97, 97, 7, 7), search_of(mask), DetectorConfig()) == []
+
+
+def test_leftover_blobs_are_the_pieces_near_an_accepted_ball():
+    ball = Candidate(120.0, 120.0, 25.0)
+    explained = disc(SHAPE, 120.0, 120.0, 25.0) | disc(SHAPE, 160.0, 120.0, 15.0)  # a neighbour
+    explained |= disc(SHAPE, 290.0, 30.0, 10.0)  # far away
+    cv2.circle(explained, (120, 120), int(math.ceil(25.0 * 1.08 + 1)), EXPLAINED, -1)
+    pieces = leftover_blobs([ball], explained)
+    assert len(pieces) == 1
+    left, top, width, height = cv2.boundingRect(pieces[0])
+    # the neighbour's part outside the accepted ball's disc, in frame coordinates
+    assert 145 <= left <= 150 and left + width == 176 and 105 <= top <= 107
+    assert leftover_blobs([], explained) == []
