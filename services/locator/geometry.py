@@ -51,7 +51,12 @@ OpenCV's HoughCircles run on drawn ellipses of 5-25 % elongation reports radii s
 wrong model costs nothing on axis and grows with elongation: a detector reporting the enclosing
 circle read as ``mean`` is 6 % short at x = 0.9 and 9 % short at x = y = 0.9.
 
-Lens distortion is not modelled (CameraInfo carries none).
+Lens distortion. A CameraInfo with ``distortion_model`` ``plumb_bob`` and non-zero ``d`` (a
+real camera's calibration) describes an image whose circle was measured through the lens: the
+exact model first maps the detected circle to the ideal pinhole image (:func:`undistort_circle`:
+points on its rim through ``cv2.undistortPoints``, then the circle of the same ``circle_model``
+fitted to them) and solves that. Near the border of a wide lens this matters: a ball's centre
+moves tens of pixels and its size changes by percents.
 """
 
 import math
@@ -59,6 +64,14 @@ from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
+
+DISTORTION_MODELS = ("plumb_bob", "", "none")
+# Points taken on a detected circle's rim to carry it through the lens model, and on a sphere's
+# outline through a distorted lens (its area is then short by (2 pi / N)^2 / 6, 5e-5 of it).
+_RIM_POINTS = 64
+_OUTLINE_POINTS = 360
+# cv2.undistortPoints' default 5 iterations leave pixels of error at a wide lens' corners.
+_UNDISTORT_CRITERIA = (3, 100, 1e-10)  # cv2.TERM_CRITERIA_COUNT | EPS, without importing cv2 here
 
 CIRCLE_MODELS = ("mean", "area", "enclosing")
 DEFAULT_CIRCLE_MODEL = "mean"
@@ -86,7 +99,9 @@ class Position3D:
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """Pinhole intrinsics in pixels, as carried by the contract's CameraInfo."""
+    """Pinhole intrinsics in pixels, as carried by the contract's CameraInfo, and the lens'
+    ``plumb_bob`` distortion coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])`` (empty or all
+    zero: an ideal pinhole)."""
 
     fx: float
     fy: float
@@ -94,6 +109,7 @@ class Intrinsics:
     cy: float
     width: int
     height: int
+    distortion: tuple[float, ...] = ()
 
     def __post_init__(self):
         for name in ("fx", "fy"):
@@ -106,6 +122,18 @@ class Intrinsics:
         for name in ("width", "height"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+        if len(self.distortion) not in (0, 4, 5, 8) or not all(
+                math.isfinite(value) for value in self.distortion):
+            raise ValueError(f"distortion: expected 0, 4, 5 or 8 finite coefficients, "
+                             f"got {self.distortion!r}")
+
+    @property
+    def distorted(self) -> bool:
+        return any(value != 0.0 for value in self.distortion)
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @classmethod
     def from_fov(cls, width: int, height: int, h_fov: float) -> "Intrinsics":
@@ -120,9 +148,14 @@ class Intrinsics:
 
     @classmethod
     def from_camera_info(cls, info: Mapping) -> "Intrinsics":
-        """From a decoded CameraInfo message (a dict with fx, fy, cx, cy, width, height)."""
+        """From a decoded CameraInfo message (a dict with fx, fy, cx, cy, width, height, and
+        optionally distortion_model and d)."""
+        model = info.get("distortion_model", "")
+        if model not in DISTORTION_MODELS:
+            raise ValueError(f"distortion_model: {model!r} is not one of plumb_bob, none")
+        distortion = tuple(float(value) for value in info.get("d", ())) if model == "plumb_bob" else ()
         return cls(float(info["fx"]), float(info["fy"]), float(info["cx"]), float(info["cy"]),
-                   int(info["width"]), int(info["height"]))
+                   int(info["width"]), int(info["height"]), distortion)
 
     @property
     def h_fov(self) -> float:
@@ -257,10 +290,76 @@ def project_sphere(center_xyz: Sequence[float], radius: float, intrinsics: Intri
     """The circle ``(u, v, radius_px)`` a detector reports for a sphere, under ``circle_model``.
 
     The centre is the silhouette ellipse's centre and the radius :func:`circle_radius` of its
-    semi-axes. :func:`locate_exact` is the inverse of this function.
+    semi-axes. Through a distorted lens the silhouette is no longer an ellipse: its outline (the
+    sphere's tangent circle, projected with the lens model) stands in for it by the ellipse of
+    the same area moments (:func:`outline_ellipse`). :func:`locate_exact` is the inverse of this
+    function.
     """
-    ellipse = silhouette_ellipse(center_xyz, radius, intrinsics)
+    if intrinsics.distorted:
+        ellipse = outline_ellipse(distorted_silhouette(center_xyz, radius, intrinsics))
+    else:
+        ellipse = silhouette_ellipse(center_xyz, radius, intrinsics)
     return ellipse.u, ellipse.v, circle_radius(ellipse.semi_major, ellipse.semi_minor, circle_model)
+
+
+def distort(normalised: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """Pixels of ideal normalised image points (N x 2, ``X/Z, Y/Z``) through the plumb_bob lens
+    (the OpenCV/ROS model, as cv2.projectPoints: radial k1 k2 k3 over k4 k5 k6, tangential
+    p1 p2)."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = (list(intrinsics.distortion) + [0.0] * 8)[:8]
+    x, y = normalised[:, 0], normalised[:, 1]
+    r2 = x * x + y * y
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    distorted_x = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    distorted_y = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return np.column_stack([intrinsics.fx * distorted_x + intrinsics.cx,
+                            intrinsics.fy * distorted_y + intrinsics.cy])
+
+
+def distorted_silhouette(center_xyz: Sequence[float], radius: float, intrinsics: Intrinsics,
+                         points: int = _OUTLINE_POINTS) -> np.ndarray:
+    """The sphere's outline in the image (``points`` x 2 pixels, in order): the circle where
+    rays from the camera graze the sphere, projected through the lens."""
+    center = np.asarray(center_xyz, float)
+    distance = float(np.linalg.norm(center))
+    if not (center[2] > radius > 0.0):
+        raise ValueError(f"sphere not entirely in front of the camera (z={center[2]!r} <= radius={radius!r})")
+    axis = center / distance
+    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    first = np.cross(axis, helper)
+    first /= np.linalg.norm(first)
+    second = np.cross(axis, first)
+    ring_centre = center * (1.0 - (radius / distance) ** 2)
+    ring_radius = radius * math.sqrt((distance - radius) * (distance + radius)) / distance
+    angles = np.linspace(0.0, 2.0 * math.pi, points, endpoint=False)
+    ring = ring_centre + ring_radius * (np.outer(np.cos(angles), first) + np.outer(np.sin(angles), second))
+    return distort(ring[:, :2] / ring[:, 2:], intrinsics)
+
+
+def outline_ellipse(outline: np.ndarray) -> Ellipse:
+    """The ellipse with the same area, centroid and second moments as the closed polygon
+    ``outline`` (N x 2, in order): for an ellipse's own outline, that ellipse (up to the
+    polygon's O(1/N^2) shortfall), however its points are spaced."""
+    x, y = outline[:, 0] - outline[:, 0].mean(), outline[:, 1] - outline[:, 1].mean()
+    next_x, next_y = np.roll(x, -1), np.roll(y, -1)
+    cross = x * next_y - next_x * y
+    area = 0.5 * float(np.sum(cross))
+    if not abs(area) > 0.0:
+        raise ValueError("degenerate outline (no area)")
+    centre_x = float(np.sum((x + next_x) * cross)) / (6.0 * area)
+    centre_y = float(np.sum((y + next_y) * cross)) / (6.0 * area)
+    xx = float(np.sum((x * x + x * next_x + next_x * next_x) * cross)) / (12.0 * area) - centre_x ** 2
+    yy = float(np.sum((y * y + y * next_y + next_y * next_y) * cross)) / (12.0 * area) - centre_y ** 2
+    xy = float(np.sum((x * next_y + 2 * x * y + 2 * next_x * next_y + next_x * y) * cross)) / (24.0 * area) \
+        - centre_x * centre_y
+    # A filled ellipse's second central moments are a^2/4 and b^2/4 along its axes.
+    spread = math.hypot(0.5 * (xx - yy), xy)
+    major, minor = 0.5 * (xx + yy) + spread, max(0.0, 0.5 * (xx + yy) - spread)
+    angle = 0.5 * math.atan2(2.0 * xy, xx - yy)
+    if angle <= -0.5 * math.pi:
+        angle += math.pi
+    return Ellipse(centre_x + float(outline[:, 0].mean()), centre_y + float(outline[:, 1].mean()),
+                   2.0 * math.sqrt(major), 2.0 * math.sqrt(minor), angle)
 
 
 def _cone_angles(centre_offset: float, radius: float, circle_model: str) -> tuple[float, float]:
@@ -318,10 +417,37 @@ def _locate_square_pixels(normal_x: float, normal_y: float, normal_radius: float
     return distance * np.array([math.sin(phi) * radial_x, math.sin(phi) * radial_y, math.cos(phi)])
 
 
+def undistort_circle(u: float, v: float, radius_px: float, intrinsics: Intrinsics,
+                     circle_model: str = DEFAULT_CIRCLE_MODEL) -> tuple[float, float, float]:
+    """The circle ``(u, v, radius_px)`` seen through the lens, roughly as the ideal pinhole camera
+    with the same ``fx fy cx cy`` would have reported it: its rim's points are undistorted and
+    the ``circle_model`` circle of their outline taken. Unchanged without distortion.
+    (:func:`locate_exact` starts from this and then inverts the lens model exactly.)"""
+    if not intrinsics.distorted:
+        return u, v, radius_px
+    import cv2
+
+    angles = np.linspace(0.0, 2.0 * math.pi, _RIM_POINTS, endpoint=False)
+    rim = np.column_stack([u + radius_px * np.cos(angles), v + radius_px * np.sin(angles)])
+    matrix = intrinsics.camera_matrix
+    points, coefficients = rim.reshape(-1, 1, 2), np.array(intrinsics.distortion)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4 takes the criteria in a separate function
+        ideal = cv2.undistortPointsIter(points, matrix, coefficients, None, matrix, _UNDISTORT_CRITERIA)
+    else:
+        ideal = cv2.undistortPoints(points, matrix, coefficients, None, None, matrix, _UNDISTORT_CRITERIA)
+    ideal = ideal.reshape(-1, 2)
+    if not np.all(np.isfinite(ideal)):
+        raise ValueError("the circle lies outside the lens model's valid range")
+    ellipse = outline_ellipse(ideal)
+    return ellipse.u, ellipse.v, circle_radius(ellipse.semi_major, ellipse.semi_minor, circle_model)
+
+
 def locate_exact(u: float, v: float, radius_px: float, intrinsics: Intrinsics, ball_radius: float,
                  circle_model: str = DEFAULT_CIRCLE_MODEL) -> Position3D:
     """The sphere centre whose detected circle is ``(u, v, radius_px)``; the inverse of
-    :func:`project_sphere` (exact for the circle model, to numerical precision)."""
+    :func:`project_sphere` (exact for the circle model, to numerical precision). With lens
+    distortion the circle is first carried to the ideal image by :func:`undistort_circle`, and
+    the answer refined by Newton's method on the distorted :func:`project_sphere`."""
     for name, value in (("u", u), ("v", v), ("radius_px", radius_px), ("ball_radius", ball_radius)):
         if not math.isfinite(value):
             raise ValueError(f"{name}: must be finite, got {value!r}")
@@ -332,11 +458,12 @@ def locate_exact(u: float, v: float, radius_px: float, intrinsics: Intrinsics, b
     if circle_model not in CIRCLE_MODELS:
         raise ValueError(f"circle_model: must be one of {', '.join(CIRCLE_MODELS)}, got {circle_model!r}")
 
+    ideal_u, ideal_v, ideal_radius = undistort_circle(u, v, radius_px, intrinsics, circle_model)
     fx, fy = intrinsics.fx, intrinsics.fy
     mean_focal = math.sqrt(fx * fy)
-    center = _locate_square_pixels((u - intrinsics.cx) / fx, (v - intrinsics.cy) / fy,
-                                   radius_px / mean_focal, ball_radius, circle_model)
-    if abs(fx - fy) > 1e-12 * mean_focal:
+    center = _locate_square_pixels((ideal_u - intrinsics.cx) / fx, (ideal_v - intrinsics.cy) / fy,
+                                   ideal_radius / mean_focal, ball_radius, circle_model)
+    if abs(fx - fy) > 1e-12 * mean_focal or intrinsics.distorted:
         center = _refine(center, np.array([u, v, radius_px]), intrinsics, ball_radius, circle_model)
     x, y, z = (float(value) for value in center)
     return Position3D(x, y, z, math.sqrt(x * x + y * y + z * z))
@@ -344,7 +471,8 @@ def locate_exact(u: float, v: float, radius_px: float, intrinsics: Intrinsics, b
 
 def _refine(center: np.ndarray, observed: np.ndarray, intrinsics: Intrinsics, ball_radius: float,
             circle_model: str) -> np.ndarray:
-    """Newton's method on project_sphere for non-square pixels, from the square-pixel answer.
+    """Newton's method on project_sphere for non-square pixels or a distorted lens, from the
+    square-pixel, undistorted answer.
 
     Unknowns: the centre's normalised image coordinates X/Z, Y/Z and log of its distance, which
     keeps every iterate in front of the camera.
