@@ -29,7 +29,7 @@ def _check_positive(name: str, value: float) -> None:
 
 @dataclass
 class DetectorConfig:
-    """Every knob of :class:`services.detector.pipeline.BallDetector`.
+    """Every knob of :class:`services.detector.detector.BallDetector`.
 
     Colour: OpenCV HSV ranges (H 0-179, S and V 0-255). ``h_min > h_max`` means a range that
     wraps through 0 (for red targets). V is tested after brightness normalisation (global gain,
