@@ -7,7 +7,9 @@ topics map to keys by dropping the leading slash, as zenoh-bridge-ros2dds does.
 
 from dataclasses import dataclass
 
-SERVICES = ("detector", "locator", "follower", "simulator")
+# What `python -m deploy start` runs by default; the ROS 2 bridge is started on request.
+CORE_SERVICES = ("detector", "locator", "follower", "simulator")
+SERVICES = (*CORE_SERVICES, "ros2_bridge")
 
 IMAGE_RAW = "camera/image_raw"
 CAMERA_INFO = "camera/camera_info"

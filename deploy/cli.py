@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from balltrack.common.keys import SERVICES, Keys
+from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys
 from balltrack.common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints
 from balltrack.common.status import service_status
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
@@ -374,8 +374,9 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
                        help="another host's router for ours to join (a cluster), repeatable")
     start.add_argument("--router-config", metavar="FILE",
                        help="a Zenoh json5 config for the router (e.g. deploy/zenoh/router.json5)")
-    start.add_argument("--services", default=",".join(SERVICES),
-                       help=f"comma-separated services to run (default {','.join(SERVICES)})")
+    start.add_argument("--services", default=",".join(CORE_SERVICES),
+                       help=f"comma-separated services to run (default {','.join(CORE_SERVICES)}; "
+                            f"known: {','.join(SERVICES)})")
     start.add_argument("--connect", action="append", metavar="ENDPOINT",
                        help="the router the services use, repeatable (default: ours with --router, "
                             "else $BALLTRACK_CONNECT or tcp/127.0.0.1:7447)")
