@@ -1,13 +1,32 @@
-"""One way to configure every service: dataclass defaults, then a TOML file, then ``--set``.
+"""One way to configure every service: declared defaults, then a TOML file, then ``--set``.
 
-Each service declares one ``@dataclass`` whose ``__post_init__`` validates and raises
-:class:`ConfigError` naming the field. ``load_config`` and ``replace_config`` are the only
-ways a config is built from outside, so the file, the command line and the live
-``<service>/config`` queryable all go through the same conversion and validation.
+Each service declares one ``@dataclass`` whose fields are declared with :func:`param`: the
+default, a one-line meaning and the bounds, all next to the field. Everything else reads that
+one declaration: the generic validation (:func:`check_fields`, type, bounds, choices), the
+service's ``--help``, the README's parameter tables (``deploy/params.py``) and the live
+``<service>/config`` queryable's ``describe`` (:func:`describe_config`). String choices are a
+``StrEnum`` field type, whose members compare equal to (and serialise as) plain strings.
+
+``__post_init__`` calls :func:`check_fields` and then checks only rules between fields, raising
+:class:`ConfigError` naming the field. ``load_config`` and ``replace_config`` are the only ways
+a config is built from outside, so the file, the command line and the live queryable all go
+through the same conversion and validation.
+
+Example::
+
+    @dataclass
+    class ExampleConfig:
+        gain: float = param(0.5, "loop gain", low=0, high=1)
+        mode: Mode = param(Mode.fast, "how to run")
+
+        def __post_init__(self):
+            check_fields(self)
 """
 
 import dataclasses
+import enum
 import math
+import textwrap
 import tomllib
 import typing
 from pathlib import Path
@@ -15,14 +34,214 @@ from typing import Any, Iterable, TypeVar
 
 T = TypeVar("T")
 
+# The key under which param() stores its declaration in dataclasses.field(metadata=...).
+METADATA_KEY = "balltrack.param"
+
 
 class ConfigError(ValueError):
     """A bad configuration value; the message starts with the offending key."""
 
 
+@dataclasses.dataclass(frozen=True)
+class Param:
+    """What :func:`param` declares about a field besides its default.
+
+    ``low``/``high`` are inclusive bounds, or exclusive ones when ``low_open``/``high_open``;
+    ``off`` is a value that switches the feature off and is accepted outside the bounds."""
+
+    meaning: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    off: Any = None
+
+
+def param(default: Any, meaning: str, *, low: float | None = None, high: float | None = None,
+          above: float | None = None, below: float | None = None, off: Any = None) -> Any:
+    """A dataclass field with its meaning and bounds: ``low``/``high`` inclusive,
+    ``above``/``below`` exclusive (give one of each pair at most), ``off`` a value accepted
+    outside them (e.g. 0 = no limit). Choices come from a ``StrEnum`` annotation."""
+    if low is not None and above is not None or high is not None and below is not None:
+        raise TypeError("param: give low or above, high or below, not both")
+    declaration = Param(meaning=meaning,
+                        low=above if above is not None else low,
+                        high=below if below is not None else high,
+                        low_open=above is not None, high_open=below is not None, off=off)
+    metadata = {METADATA_KEY: declaration}
+    if isinstance(default, (list, dict, set)):
+        return dataclasses.field(default_factory=lambda: type(default)(default), metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def declaration(field: dataclasses.Field) -> Param | None:
+    """The field's :class:`Param`, or None for a field declared without :func:`param`."""
+    return field.metadata.get(METADATA_KEY)
+
+
 def _field_types(cls) -> dict[str, Any]:
     hints = typing.get_type_hints(cls)
     return {field.name: hints[field.name] for field in dataclasses.fields(cls)}
+
+
+def _is_choice(annotation: Any) -> bool:
+    return isinstance(annotation, type) and issubclass(annotation, enum.Enum)
+
+
+def choices(annotation: Any) -> tuple[str, ...] | None:
+    """The allowed values of a choice field's type (a StrEnum), else None."""
+    return tuple(member.value for member in annotation) if _is_choice(annotation) else None
+
+
+def _number_text(value: float) -> str:
+    return format(value, "g") if isinstance(value, float) else str(value)
+
+
+def bounds_text(declared: Param | None) -> str:
+    """``[0, 179]``, ``> 0``, ``<= 1``, ``0 or >= 64``...; empty without bounds."""
+    if declared is None or (declared.low is None and declared.high is None):
+        return ""
+    low, high = declared.low, declared.high
+    if low is not None and high is not None:
+        text = (f"{'(' if declared.low_open else '['}{_number_text(low)}, "
+                f"{_number_text(high)}{')' if declared.high_open else ']'}")
+    elif low is not None:
+        text = f"{'>' if declared.low_open else '>='} {_number_text(low)}"
+    else:
+        text = f"{'<' if declared.high_open else '<='} {_number_text(high)}"
+    if declared.off is not None:
+        text = f"{_number_text(declared.off)} or {text}"
+    return text
+
+
+def _within(value: float, declared: Param) -> bool:
+    if declared.off is not None and value == declared.off:
+        return True
+    if declared.low is not None and (value <= declared.low if declared.low_open else value < declared.low):
+        return False
+    if declared.high is not None and (value >= declared.high if declared.high_open else value > declared.high):
+        return False
+    return True
+
+
+def _checked(name: str, annotation: Any, value: Any) -> Any:
+    """``value`` as the field's type (an int for a float field becomes a float, a string for a
+    choice field its member), or a one-line ConfigError naming the field."""
+    origin = typing.get_origin(annotation)
+    if origin is list:
+        (item_type,) = typing.get_args(annotation) or (Any,)
+        if not isinstance(value, list):
+            raise ConfigError(f"{name}: expected a list, got {value!r}")
+        return [_checked(name, item_type, item) for item in value]
+    if annotation is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}: expected a boolean, got {value!r}")
+    elif annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{name}: expected an integer, got {value!r}")
+    elif annotation is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{name}: expected a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"{name}: must be finite, got {value!r}")
+    elif _is_choice(annotation):
+        try:
+            return annotation(value)
+        except ValueError:
+            raise ConfigError(f"{name}: must be one of {', '.join(choices(annotation))}, "
+                              f"got {value!r}") from None
+    elif annotation is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{name}: expected a string, got {value!r}")
+    return value
+
+
+def check_fields(config: Any) -> None:
+    """The checks every field's declaration implies, in field order: its type (converting an
+    int to a float and a string to a choice member in place), finite numbers, bounds, choices."""
+    types = _field_types(type(config))
+    for field in dataclasses.fields(config):
+        value = _checked(field.name, types[field.name], getattr(config, field.name))
+        declared = declaration(field)
+        if declared is not None and isinstance(value, (int, float)) and not isinstance(value, bool) \
+                and not _within(value, declared):
+            bounds = bounds_text(declared)
+            wording = f"in {bounds}" if bounds[0] in "[(" else bounds
+            raise ConfigError(f"{field.name}: must be {wording}, got {value!r}")
+        setattr(config, field.name, value)
+
+
+def _type_name(annotation: Any) -> str:
+    if typing.get_origin(annotation) is list:
+        (item,) = typing.get_args(annotation) or (Any,)
+        return f"list[{_type_name(item)}]"
+    if _is_choice(annotation):
+        return "str"
+    return getattr(annotation, "__name__", str(annotation))
+
+
+def _plain(value: Any) -> Any:
+    """A config value as TOML/msgpack/JSON hold it: choice members as their strings."""
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, list):
+        return [_plain(item) for item in value]
+    return value
+
+
+def field_default(field: dataclasses.Field) -> Any:
+    if field.default is not dataclasses.MISSING:
+        return field.default
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return None
+
+
+def describe_config(cls: type) -> dict[str, dict[str, Any]]:
+    """Every parameter's declaration, plain values only (for msgpack, JSON and tables):
+    ``{name: {type, default, meaning, low, high, low_open, high_open, off, bounds, choices}}``;
+    ``bounds`` is the readable form of the bounds, ``choices`` a list or None."""
+    types = _field_types(cls)
+    described = {}
+    for field in dataclasses.fields(cls):
+        declared = declaration(field) or Param(meaning="")
+        allowed = choices(types[field.name])
+        described[field.name] = {
+            "type": _type_name(types[field.name]),
+            "default": _plain(field_default(field)),
+            "meaning": declared.meaning,
+            "low": declared.low, "high": declared.high,
+            "low_open": declared.low_open, "high_open": declared.high_open,
+            "off": declared.off,
+            "bounds": bounds_text(declared),
+            "choices": list(allowed) if allowed else None,
+        }
+    return described
+
+
+def format_value(value: Any) -> str:
+    """A value as it is written in TOML: true/false, quoted strings."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    return repr(value)
+
+
+def help_text(cls: type, width: int = 100) -> str:
+    """The parameters for a service's ``--help`` epilog: name = default, type and bounds or
+    choices, then the meaning, wrapped."""
+    lines = ["parameters (--set NAME=VALUE, or NAME = VALUE in the --config TOML file):"]
+    for name, described in describe_config(cls).items():
+        allowed = described["bounds"]
+        if described["choices"]:
+            allowed = "one of " + ", ".join(described["choices"])
+        lines.append(f"  {name} = {format_value(described['default'])}  "
+                     f"({described['type']}{', ' + allowed if allowed else ''})")
+        lines += textwrap.wrap(described["meaning"].replace("`", ""), width,
+                               initial_indent="      ", subsequent_indent="      ")
+    return "\n".join(lines)
 
 
 def _parse_bool(text: str) -> bool:
@@ -135,4 +354,5 @@ def replace_config(config: T, changes: dict[str, Any]) -> T:
 
 
 def config_to_dict(config: Any) -> dict[str, Any]:
-    return dataclasses.asdict(config)
+    """The config's values as TOML, msgpack and JSON hold them (choices as plain strings)."""
+    return {name: _plain(value) for name, value in dataclasses.asdict(config).items()}

@@ -207,6 +207,26 @@ def _check_image(value, path):
     return message
 
 
+def _or_none(check: Check) -> Check:
+    def checked(value, path):
+        return None if value is None else check(value, path)
+    return checked
+
+
+_PARAMETER = record({"type": text(), "meaning": text(max_length=1024)},
+                   {"low": _or_none(number()), "high": _or_none(number()), "low_open": boolean,
+                    "high_open": boolean, "bounds": text(),
+                    "choices": _or_none(listing(text(), max_items=256))})
+
+
+def _parameters(value, path):
+    """ConfigReply's ``parameters``: {name: the declaration of one parameter}."""
+    checked = record({})(value, path)
+    if len(checked) > MAX_LIST:
+        _fail(path, f"more than {MAX_LIST} parameters")
+    return {name: _PARAMETER(declared, f"{path}.{name}") for name, declared in checked.items()}
+
+
 SCHEMAS: dict[str, Check] = {
     "Image": _check_image,
     "CameraInfo": record({
@@ -248,9 +268,12 @@ SCHEMAS: dict[str, Check] = {
         "real_time_factor": number(0.0), "frames": integer(0), "render_ms": number(0.0),
         "lockstep_timeouts": integer(0),
     }),
-    # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes.
-    "ConfigRequest": record({}, {"set": lambda value, path: record({})(value, path)}),
-    "ConfigReply": record({"ok": boolean}, {"config": record({}), "error": text(max_length=4096)}),
+    # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes,
+    # {"describe": true} adds every parameter's declaration to the reply.
+    "ConfigRequest": record({}, {"set": lambda value, path: record({})(value, path),
+                                 "describe": boolean}),
+    "ConfigReply": record({"ok": boolean}, {"config": record({}), "error": text(max_length=4096),
+                                            "parameters": _parameters}),
 }
 
 

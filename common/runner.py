@@ -2,8 +2,9 @@
 
 ``run_service`` parses the shared options, loads the config (a bad one exits 2 with one
 line), opens the session, declares the liveliness token ``alive/<service>``, publishes
-``<service>/stats`` at 1 Hz, answers ``<service>/config`` (read, or change parameters live),
-and stops on SIGINT/SIGTERM by setting one event, closing the session explicitly, exit 0.
+``<service>/stats`` at 1 Hz, answers ``<service>/config`` (read, change parameters live, or
+``{"describe": true}`` for their declarations), and stops on SIGINT/SIGTERM by setting one
+event, closing the session explicitly, exit 0.
 
 A service module only says what it subscribes to and publishes::
 
@@ -31,7 +32,8 @@ import zenoh
 
 from balltrack.common import keys as key_table
 from balltrack.common.clock import SimClock, TimerTicks, WallClock
-from balltrack.common.config import ConfigError, config_to_dict, load_config, replace_config
+from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
+                                     replace_config)
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
@@ -283,6 +285,8 @@ def _serve_config(context: ServiceContext, query) -> None:
             context.set_config(request["set"])
             context.log.info("config changed: %s", shorten(request["set"], 300))
         reply = {"ok": True, "config": config_to_dict(context.config)}
+        if request.get("describe"):
+            reply["parameters"] = describe_config(type(context.config))
     except (MessageError, ConfigError) as error:
         reply = {"ok": False, "error": shorten(str(error), 300)}
     except Exception as error:  # e.g. a value too deep to format: still an answer, not silence
@@ -297,9 +301,11 @@ def _serve_config(context: ServiceContext, query) -> None:
     query.reply(query.key_expr, answer)
 
 
-def build_parser(name: str, description: str | None) -> argparse.ArgumentParser:
+def build_parser(name: str, description: str | None, config_class=None) -> argparse.ArgumentParser:
+    """The service's options; with ``config_class``, ``--help`` ends with every parameter."""
     parser = ArgumentParser(prog=f"balltrack run {name}", description=description,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                            epilog=help_text(config_class) if config_class else None,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     add_session_arguments(parser)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
@@ -309,7 +315,7 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
                 argv: list[str] | None = None, description: str | None = None) -> int:
     """Run a service until SIGINT/SIGTERM. ``build`` declares its keys and may return a
     blocking ``loop(context)`` to run in the main thread (it must return once ``stop`` is set)."""
-    parser = build_parser(name, description)
+    parser = build_parser(name, description, config_class)
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
     try:

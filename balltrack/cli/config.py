@@ -4,6 +4,7 @@
     balltrack config detector v_min=30 param2=18 # change live (all or nothing)
     balltrack config dump detector > detector.yaml
     balltrack config load detector detector.yaml # the same file works as --config for a start
+    balltrack config detector --describe         # every parameter: type, default, bounds, meaning
 """
 
 import json
@@ -21,8 +22,8 @@ from balltrack.common.messages import MessageError, decode, encode, shorten
 ACTIONS = ("dump", "load")
 
 
-def ask(args, service: str, request: dict) -> tuple[int, dict | None]:
-    """(exit status, the ConfigReply's config) after one ConfigRequest to ``service``."""
+def ask(args, service: str, request: dict, field: str = "config") -> tuple[int, dict | None]:
+    """(exit status, the ConfigReply's ``field``) after one ConfigRequest to ``service``."""
     session = open_or_report(args)
     if session is None:
         return 1, None
@@ -42,7 +43,7 @@ def ask(args, service: str, request: dict) -> tuple[int, dict | None]:
         if not answer["ok"]:
             print(f"balltrack config: {answer.get('error')}", file=sys.stderr)
             return 2, None
-        return 0, answer["config"]
+        return 0, answer.get(field)
     print(f"balltrack config: no {service} answered on {key}", file=sys.stderr)
     return 1, None
 
@@ -81,6 +82,15 @@ def command_config(args) -> int:
     except ConfigError as error:
         print(f"balltrack config: {error}", file=sys.stderr)
         return 2
+    if args.describe:
+        status, parameters = ask(args, service, {"describe": True, **({"set": changes} if changes else {})},
+                                 "parameters")
+        if status == 0 and parameters is None:
+            print(f"balltrack config: {service} did not describe its parameters", file=sys.stderr)
+            return 1
+        if parameters is not None:
+            print(json.dumps(parameters, indent=2))
+        return status
     status, config = ask(args, service, {"set": changes} if changes else {})
     if config is None:
         return status
@@ -100,3 +110,5 @@ def register(commands) -> None:
                        command_config)
     config.add_argument("target", metavar="SERVICE|dump|load")
     config.add_argument("rest", nargs="*", metavar="KEY=VALUE | SERVICE [FILE]")
+    config.add_argument("--describe", action="store_true",
+                        help="print every parameter's type, default, bounds or choices and meaning")

@@ -1,52 +1,52 @@
-"""Locator parameters: the paper's ``h_fov`` and ``ball_radius``, plus the choice of model."""
+"""Locator parameters: the paper's ``h_fov`` and ``ball_radius``, plus the choice of model.
 
+Example::
+
+    balltrack run locator --set mode=faithful --set circle_model=area
+"""
+
+import enum
 import math
 from dataclasses import dataclass
 
-from balltrack.common.config import ConfigError
+from balltrack.common.config import check_fields, param
 
 from balltrack.services.locator.geometry import CIRCLE_MODELS
 
-LOCATOR_MODES = ("auto", "exact", "faithful")
+
+class LocatorMode(enum.StrEnum):
+    # Member names equal their values: an Enum hashes by name, so only then does a member
+    # find the same dict entries as its plain string.
+    auto = "auto"
+    exact = "exact"
+    faithful = "faithful"
+
+
+# The geometry implements the models and owns their names; the config only offers them.
+CircleModel = enum.StrEnum("CircleModel", [(name, name) for name in CIRCLE_MODELS])
 
 
 @dataclass
 class LocatorConfig:
-    """How Ball2D detections are turned into 3D positions.
+    """How Ball2D detections are turned into 3D positions (see :mod:`services.locator.geometry`)."""
 
-    ``h_fov`` (radians) is only used by the faithful model (the exact model takes the field of
-    view from CameraInfo); 1.089 rad is the paper's camera. ``ball_radius`` is in metres, a
-    tennis ball by default. ``mode``: ``exact`` (pinhole, needs CameraInfo), ``faithful`` (the
-    paper's equations 1-8) or ``auto`` (exact once CameraInfo intrinsics have been seen, else
-    faithful). ``circle_model`` is what the detector's circle is assumed to measure of the
-    ball's elliptical silhouette (see :mod:`services.locator.geometry`): ``mean`` (best-fit
-    circle), ``area`` (equal-area circle) or ``enclosing`` (smallest enclosing circle).
-    """
-
-    h_fov: float = 1.089
-    ball_radius: float = 0.033
-    mode: str = "auto"
-    circle_model: str = "mean"
+    # 1.089 rad is the paper's camera (Gazebo's default).
+    h_fov: float = param(1.089, "horizontal field of view (rad), used by the faithful model without "
+                                "CameraInfo", above=0, below=math.pi)
+    ball_radius: float = param(0.033, "the ball's real radius (m); 0.033 = a tennis ball", above=0)
+    mode: LocatorMode = param(LocatorMode.auto, "`exact` (pinhole, needs CameraInfo), `faithful` (the "
+                                                "paper's equations 1-8) or `auto` (exact once CameraInfo "
+                                                "was seen)")
+    circle_model: CircleModel = param(CircleModel.mean, "what the detector's circle measures of the "
+                                                        "ball's elliptic silhouette: `mean` (best-fit "
+                                                        "circle), `area` (equal-area circle) or "
+                                                        "`enclosing` (smallest enclosing circle)")
 
     def __post_init__(self):
-        if isinstance(self.h_fov, bool) or not isinstance(self.h_fov, (int, float)):
-            raise ConfigError(f"h_fov: expected a number, got {self.h_fov!r}")
-        if not (math.isfinite(self.h_fov) and 0.0 < self.h_fov < math.pi):
-            raise ConfigError(f"h_fov: must be in (0, pi) radians, got {self.h_fov!r}")
-        if isinstance(self.ball_radius, bool) or not isinstance(self.ball_radius, (int, float)):
-            raise ConfigError(f"ball_radius: expected a number, got {self.ball_radius!r}")
-        if not (math.isfinite(self.ball_radius) and self.ball_radius > 0.0):
-            raise ConfigError(f"ball_radius: must be > 0 metres, got {self.ball_radius!r}")
-        if self.mode not in LOCATOR_MODES:
-            raise ConfigError(f"mode: must be one of {', '.join(LOCATOR_MODES)}, got {self.mode!r}")
-        if self.circle_model not in CIRCLE_MODELS:
-            raise ConfigError(
-                f"circle_model: must be one of {', '.join(CIRCLE_MODELS)}, got {self.circle_model!r}")
-        self.h_fov = float(self.h_fov)
-        self.ball_radius = float(self.ball_radius)
+        check_fields(self)
 
     def resolved_mode(self, have_intrinsics: bool) -> str:
         """``exact`` or ``faithful``: what ``mode`` means given whether CameraInfo was seen."""
-        if self.mode == "auto":
-            return "exact" if have_intrinsics else "faithful"
+        if self.mode == LocatorMode.auto:
+            return LocatorMode.exact if have_intrinsics else LocatorMode.faithful
         return self.mode

@@ -8,122 +8,87 @@ Example ``simulator.toml``::
     light_diffuse = 0.05
 """
 
+import enum
 import math
 from dataclasses import dataclass
 
-from balltrack.common.config import ConfigError
-
-PACING_MODES = ("realtime", "fast", "lockstep")
-ENCODINGS = ("rgb8", "bgr8", "jpeg")
+from balltrack.common.config import ConfigError, check_fields, param
 
 
-def _positive(name: str, value: float) -> None:
-    if not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{name}: must be a finite number > 0, got {value!r}")
+class Pacing(enum.StrEnum):
+    # Member names equal their values: an Enum hashes by name, so only then does a member
+    # find the same dict entries as its plain string.
+    realtime = "realtime"
+    fast = "fast"
+    lockstep = "lockstep"
+
+
+class Encoding(enum.StrEnum):
+    rgb8 = "rgb8"
+    bgr8 = "bgr8"
+    jpeg = "jpeg"
 
 
 @dataclass
 class SimulatorConfig:
     """One simulator's settings; defaults reproduce the paper's scene at 640x480, 30 Hz."""
 
-    # A scenario name from services/simulator/scenarios/ (e.g. "chase") or a path to a .toml.
-    scenario: str = "chase"
-    # Camera image size (pixels) and horizontal field of view (radians; Gazebo's default 1.089).
-    width: int = 640
-    height: int = 480
-    hfov: float = 1.089
-    # Camera frames per simulated second; one step_frame() advances 1 / rate_hz seconds.
-    rate_hz: float = 30.0
-    # How the service paces frames against the wall clock: "realtime" (sim time follows wall
-    # time times real_time_factor), "fast" (as fast as possible) or "lockstep" (each frame waits
-    # for the detector's answer and, on command ticks, the follower's cmd_vel, each at most
-    # lockstep_timeout wall seconds, so runs are reproducible whatever the machine's load).
-    pacing: str = "realtime"
-    real_time_factor: float = 1.0
-    lockstep_timeout: float = 0.5
-    # In lockstep, frames whose clock crosses a multiple of 1 / lockstep_command_rate_hz
-    # simulated seconds wait for the follower's cmd_vel of that tick (its timer rate, 10 Hz).
-    lockstep_command_rate_hz: float = 10.0
-    # Safety stop: no cmd_vel for this many simulated seconds -> commanded velocity 0.
-    cmd_timeout: float = 0.5
-    # Robot limits: commands are clamped to max_linear (m/s) / max_angular (rad/s), and the
-    # applied velocity changes at most max_linear_accel (m/s^2) / max_angular_accel (rad/s^2).
-    max_linear: float = 0.5
-    max_angular: float = 2.0
-    max_linear_accel: float = 1.0
-    max_angular_accel: float = 4.0
-    # Light overrides; a negative value keeps the scenario's value. Grey levels in [0, 1]:
-    # light_diffuse is the main light's diffuse (the paper's "diffuse RGB"), ambient the scene's
-    # ambient level (0 = no ambient light: unlit surfaces are black).
-    light_diffuse: float = -1.0
-    ambient: float = -1.0
-    # Shadows from the main light (costs ~2x render time on the software rasteriser).
-    shadows: bool = False
-    # Seeds the image noise generator; same seed + same commands -> identical output.
-    seed: int = 0
-    # Standard deviation of Gaussian pixel noise added to rendered images (intensity levels,
-    # 0..255); 0 = noiseless.
-    image_noise: float = 0.0
-    # Published image encoding ("rgb8", "bgr8" or "jpeg") and the JPEG quality (1..100).
-    encoding: str = "rgb8"
-    jpeg_quality: int = 90
-    # Publish camera/image_raw; false stops the frames (a failed camera) while the world, the
-    # clock and the ground truth go on. Changed live, e.g. to test the follower's search.
-    publish_images: bool = True
-    # Optional recordings: an .mp4/.avi of the rendered frames, a JSON-lines ground-truth log.
-    video_path: str = ""
-    ground_truth_path: str = ""
-    # Physics step (s); rounded so a whole number of steps makes one camera period.
-    timestep: float = 0.002
+    scenario: str = param("chase", "a scenario name (`chase`, `orbit`, `multi`...) from "
+                                   "services/simulator/scenarios/ or a path to a .toml")
+    width: int = param(640, "camera image width (px)", low=16, high=4096)
+    height: int = param(480, "camera image height (px)", low=16, high=4096)
+    # Gazebo's default.
+    hfov: float = param(1.089, "camera horizontal field of view (rad)", low=0.05, high=3.0)
+    # One step_frame() advances 1 / rate_hz seconds.
+    rate_hz: float = param(30.0, "camera frames per simulated second", above=0, high=1000)
+    # Lockstep waits for the detector's answer and, on command ticks, the follower's cmd_vel,
+    # so runs are reproducible whatever the machine's load.
+    pacing: Pacing = param(Pacing.realtime, "`realtime` (follows the wall clock), `fast` (as fast as it "
+                                            "can) or `lockstep` (waits for the pipeline's answers: "
+                                            "reproducible)")
+    real_time_factor: float = param(1.0, "simulated seconds per wall second in `realtime` pacing", above=0)
+    lockstep_timeout: float = param(0.5, "longest wait for the pipeline per frame in `lockstep` (wall s)",
+                                    above=0)
+    # Frames whose clock crosses a multiple of 1 / lockstep_command_rate_hz simulated seconds
+    # wait for the follower's cmd_vel of that tick (its timer rate, 10 Hz).
+    lockstep_command_rate_hz: float = param(10.0, "in `lockstep`, the follower's timer rate whose commands "
+                                                  "are waited for", above=0, high=1000)
+    cmd_timeout: float = param(0.5, "safety stop: no cmd_vel for this long (simulated s) -> velocity 0",
+                               above=0)
+    max_linear: float = param(0.5, "commands are clamped to this forward speed (m/s)", above=0, high=10)
+    max_angular: float = param(2.0, "commands are clamped to this turn rate (rad/s)", above=0, high=20)
+    max_linear_accel: float = param(1.0, "largest change of forward speed (m/s^2)", above=0)
+    max_angular_accel: float = param(4.0, "largest change of turn rate (rad/s^2)", above=0)
+    # light_diffuse is the paper's "diffuse RGB"; an ambient of 0 leaves unlit surfaces black.
+    light_diffuse: float = param(-1.0, "main light's diffuse level in [0, 1]; negative = the scenario's",
+                                 high=1)
+    ambient: float = param(-1.0, "ambient light level in [0, 1]; negative = the scenario's", high=1)
+    # The software rasteriser pays for shadows.
+    shadows: bool = param(False, "render shadows of the main light (about 2x render time)")
+    seed: int = param(0, "seed of the image noise; same seed and commands = identical run", low=0)
+    image_noise: float = param(0.0, "standard deviation of Gaussian pixel noise (0-255 levels); 0 = none",
+                               low=0, high=100)
+    encoding: Encoding = param(Encoding.rgb8, "published image encoding: `rgb8`, `bgr8` or `jpeg`")
+    jpeg_quality: int = param(90, "JPEG quality (1-100)", low=1, high=100)
+    # Changing it live is how a test makes the follower search.
+    publish_images: bool = param(True, "publish `camera/image_raw`; false stops the frames (a failed "
+                                       "camera) while the world, clock and ground truth go on; can be "
+                                       "changed live")
+    video_path: str = param("", "if set, record the rendered frames to this .mp4/.avi")
+    ground_truth_path: str = param("", "if set, log ground truth to this JSON-lines file")
+    timestep: float = param(0.002, "physics step (s), rounded to a whole number per camera frame; at most "
+                                   "1 / rate_hz", low=1e-5)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if not self.scenario.strip():
             raise ConfigError("scenario: must name a scenario or a .toml file")
-        for name in ("width", "height"):
-            value = getattr(self, name)
-            if not 16 <= value <= 4096:
-                raise ConfigError(f"{name}: must be between 16 and 4096 pixels, got {value}")
-        if not (math.isfinite(self.hfov) and 0.05 <= self.hfov <= 3.0):
-            raise ConfigError(f"hfov: must be between 0.05 and 3.0 radians, got {self.hfov}")
-        vfov = 2 * math.atan(math.tan(self.hfov / 2) * self.height / self.width)
-        if vfov >= math.radians(175):
-            raise ConfigError("hfov: the vertical field of view would reach 180 degrees")
-        _positive("rate_hz", self.rate_hz)
-        if self.rate_hz > 1000:
-            raise ConfigError(f"rate_hz: must be <= 1000, got {self.rate_hz}")
-        if self.pacing not in PACING_MODES:
-            raise ConfigError(f"pacing: must be one of {', '.join(PACING_MODES)}, "
-                              f"got {self.pacing!r}")
-        for name in ("real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
-                     "cmd_timeout", "max_linear", "max_angular", "max_linear_accel",
-                     "max_angular_accel", "timestep"):
-            _positive(name, getattr(self, name))
-        if self.lockstep_command_rate_hz > 1000:
-            raise ConfigError(f"lockstep_command_rate_hz: must be <= 1000, "
-                              f"got {self.lockstep_command_rate_hz}")
-        if self.max_linear > 10:
-            raise ConfigError(f"max_linear: must be <= 10 m/s, got {self.max_linear}")
-        if self.max_angular > 20:
-            raise ConfigError(f"max_angular: must be <= 20 rad/s, got {self.max_angular}")
+        if self.vfov >= math.radians(175):
+            raise ConfigError(f"hfov: the vertical field of view at {self.width}x{self.height} "
+                              f"would reach 180 degrees, got {self.hfov}")
         if self.timestep > 1.0 / self.rate_hz:
             raise ConfigError(f"timestep: must not exceed the camera period 1/rate_hz "
                               f"({1.0 / self.rate_hz:.4g} s), got {self.timestep}")
-        if self.timestep < 1e-5:
-            raise ConfigError(f"timestep: must be >= 1e-5 s, got {self.timestep}")
-        for name in ("light_diffuse", "ambient"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value > 1.0:
-                raise ConfigError(f"{name}: must be <= 1 (negative = scenario's value), "
-                                  f"got {value!r}")
-        if self.seed < 0:
-            raise ConfigError(f"seed: must be >= 0, got {self.seed}")
-        if not (math.isfinite(self.image_noise) and 0 <= self.image_noise <= 100):
-            raise ConfigError(f"image_noise: must be between 0 and 100, got {self.image_noise}")
-        if self.encoding not in ENCODINGS:
-            raise ConfigError(f"encoding: must be one of {', '.join(ENCODINGS)}, "
-                              f"got {self.encoding!r}")
-        if not 1 <= self.jpeg_quality <= 100:
-            raise ConfigError(f"jpeg_quality: must be between 1 and 100, got {self.jpeg_quality}")
 
     @property
     def vfov(self) -> float:
@@ -134,4 +99,3 @@ class SimulatorConfig:
     def period(self) -> float:
         """Simulated seconds per camera frame."""
         return 1.0 / self.rate_hz
-

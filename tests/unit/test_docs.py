@@ -6,6 +6,7 @@ import re
 import pytest
 
 from balltrack.common import keys as key_table
+from balltrack.common.config import describe_config
 from balltrack.common.messages import SCHEMAS
 from balltrack.deploy import params
 from tests.harness import REPO
@@ -26,7 +27,7 @@ def test_every_config_field_is_in_the_readme(service, module_name, class_name):
     missing = [field.name for field in dataclasses.fields(params.config_class(module_name, class_name))
                if f"| `{field.name}` |" not in table]
     assert not missing, (f"README.md's {service} table lacks {missing}; "
-                         "run python -m deploy.params --write")
+                         "run python -m balltrack.deploy.params --write")
 
 
 @pytest.mark.parametrize("markers", list(params.blocks()), ids=["parameters", "keys"])
@@ -35,13 +36,19 @@ def test_generated_tables_match_the_code(markers):
     assert block is not None, f"README.md lacks the markers {markers}"
     assert block == params.blocks()[markers], (
         "README.md's generated tables (parameter names, types, defaults; keys) are out of step with "
-        "the code; run python -m deploy.params --write")
+        "the code; run python -m balltrack.deploy.params --write")
 
 
-def test_every_field_has_a_meaning():
+def test_every_row_shows_the_declared_meaning_and_bounds():
     for service, module_name, class_name in params.CONFIGS:
-        for name, _, _, meaning in params.rows(service, params.config_class(module_name, class_name)):
-            assert not meaning.startswith("see `services/"), f"{service}.{name} has no description"
+        cls = params.config_class(module_name, class_name)
+        for name, _, _, allowed, meaning in params.rows(cls):
+            declared = describe_config(cls)[name]
+            assert meaning and meaning == declared["meaning"].replace("|", "\\|"), f"{service}.{name}"
+            for choice in declared["choices"] or ():
+                assert f"`{choice}`" in allowed, f"{service}.{name} lacks the choice {choice}"
+            if declared["bounds"]:
+                assert allowed == declared["bounds"], f"{service}.{name}"
 
 
 def test_every_key_and_message_is_documented():
