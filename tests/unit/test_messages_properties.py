@@ -54,8 +54,12 @@ VALID = {
     "SimReply": {"ok": False, "error": "id: no ball 'golf'"},
     "Stats": {"service": "detector", "stamp": 10, "received": 3, "published": 2, "rejected": 1,
               "dropped": 0, "p50_ms": 4.0, "p99_ms": 9.5},
-    "ConfigRequest": {"set": {"min_fill_ratio": 0.4}},
-    "ConfigReply": {"ok": True, "config": {"min_fill_ratio": 0.4, "use_sim_time": False}},
+    "ConfigRequest": {"set": {"min_fill_ratio": 0.4}, "describe": True},
+    "ConfigReply": {"ok": True, "config": {"min_fill_ratio": 0.4, "use_sim_time": False},
+                    "parameters": {"min_fill_ratio": {
+                        "type": "float", "default": 0.55, "meaning": "smallest mask fraction",
+                        "low": 0.0, "high": 1.0, "low_open": False, "high_open": False, "off": None,
+                        "bounds": "[0, 1]", "choices": None}}},
 }
 
 
