@@ -42,6 +42,9 @@ class Ros2BridgeConfig:
 
     def __post_init__(self):
         check_fields(self)
+        for name in ("prefix", *TOPIC_FIELDS):
+            if len(getattr(self, name)) > MAX_NAME:
+                raise ConfigError(f"{name}: longer than {MAX_NAME} characters")
         try:
             cleaned = validate_namespace(self.prefix)
         except ValueError:
@@ -65,6 +68,8 @@ class Ros2BridgeConfig:
         return self.prefix + getattr(self, topic_field).strip("/")
 
 
+# ROS names are a few words; a key is copied into every sample the bridge routes.
+MAX_NAME = 256
 TOPIC_FIELDS = ("detected_ball_topic", "detected_ball_3d_topic", "cmd_vel_topic", "image_topic",
                 "compressed_image_topic", "camera_info_topic")
 BALLTRACK_KEYS = frozenset(spec.key for spec in key_table.TABLE if "<" not in spec.key)

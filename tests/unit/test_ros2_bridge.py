@@ -221,6 +221,8 @@ def test_config_prefix_and_routes():
     ({"image_topic": "/"}, "image_topic"),
     ({"cmd_vel_topic": "/cmd vel"}, "cmd_vel_topic"),
     ({"to_ros": "sometimes"}, "to_ros"),
+    ({"prefix": "x" * 100_000}, "prefix"),
+    ({"image_topic": "/x" * 200}, "image_topic"),
 ])
 def test_config_refuses(changes, field):
     with pytest.raises(ConfigError, match=f"^{field}"):
