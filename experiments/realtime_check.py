@@ -1,35 +1,37 @@
 """Does the simulator keep real time while the whole pipeline runs on this machine?
 
 Starts a router on a free port, the detector, locator and follower (on simulated time) and the
-simulator as separate processes, lets them run for ``--seconds``, and reads the simulator's
-stats: the real-time factor reached (simulated seconds per wall second), frames per second and
-render time, with each process's CPU use. Everything is stopped cleanly at the end (exit
+simulator as separate processes (``deploy/launcher.py``), lets them run for ``--seconds``, and
+reads the simulator's stats: the real-time factor reached (simulated seconds per wall second),
+frames per second and render time, with each process's CPU use. Everything is stopped cleanly at the end (exit
 statuses are printed; a non-zero one fails the run).
 
 Example::
 
-    python -m experiments.realtime_check                       # 640x480, 30 Hz, realtime
-    python -m experiments.realtime_check --pacing fast         # as fast as possible
-    python -m experiments.realtime_check --pacing fast --alone # the simulator by itself
-    python -m experiments.realtime_check --set encoding=jpeg --seconds 10
+    python -m balltrack.experiments.realtime_check                       # 640x480, 30 Hz, realtime
+    python -m balltrack.experiments.realtime_check --pacing fast         # as fast as possible
+    python -m balltrack.experiments.realtime_check --pacing fast --alone # the simulator by itself
+    python -m balltrack.experiments.realtime_check --set encoding=jpeg --seconds 10
 """
 
 import argparse
 import os
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from tests.harness import Collector, Liveliness, Router, client, start_service  # noqa: E402
+from balltrack.common.messages import decode  # noqa: E402
+from balltrack.common.session import open_session  # noqa: E402
+from balltrack.deploy.launcher import SERVICES, start_system  # noqa: E402
 
-PIPELINE = (("detector",), ("locator",), ("follower", "--set", "use_sim_time=true"))
 WARM_UP_STATS = 3  # stats messages (seconds) left out of the averages: start-up costs
 
 
-def cpu_seconds(pid: int) -> float:
+def cpu_seconds(pid: int | None) -> float:
     """User + system CPU time of a process so far (Linux /proc), 0 if unavailable."""
     try:
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -38,31 +40,44 @@ def cpu_seconds(pid: int) -> float:
         return 0.0
 
 
+class StatsStream:
+    """The ``<service>/stats`` messages of one service, and a wait for the n-th."""
+
+    def __init__(self, session, service: str):
+        self.messages: list[dict] = []
+        self._changed = threading.Condition()
+
+        def on_sample(sample):
+            with self._changed:
+                self.messages.append(decode("Stats", sample.payload.to_bytes()))
+                self._changed.notify_all()
+
+        self.subscriber = session.declare_subscriber(f"{service}/stats", on_sample)
+
+    def wait_count(self, count: int, timeout: float) -> list[dict]:
+        with self._changed:
+            if not self._changed.wait_for(lambda: len(self.messages) >= count, timeout):
+                raise RuntimeError(f"{len(self.messages)} stats messages after {timeout:g} s, not {count}")
+            return list(self.messages)
+
+
 def run(arguments, log_dir: Path) -> int:
-    router = Router(log_dir)
-    session = client(router.endpoint)
-    liveliness = Liveliness(session)
-    processes = {}
+    services = ("simulator",) if arguments.alone else SERVICES
+    simulator = [f"width={arguments.width}", f"height={arguments.height}", f"rate_hz={arguments.rate}",
+                 f"pacing={arguments.pacing}", *arguments.set]
+    settings = {"simulator": simulator} | ({} if arguments.alone else {"follower": ["use_sim_time=true"]})
+    system = start_system(log_dir, services, settings, wait=60, output=None)
+    session = None
     try:
-        if not arguments.alone:
-            for name, *extra in PIPELINE:
-                processes[name] = start_service(name, router.endpoint, log_dir, *extra)
-            for name in processes:
-                liveliness.wait(name, timeout=60)
-        stats = Collector(session, "simulator/stats", "Stats")
-        detector_stats = Collector(session, "detector/stats", "Stats")
-        settings = [f"width={arguments.width}", f"height={arguments.height}",
-                    f"rate_hz={arguments.rate}", f"pacing={arguments.pacing}", *arguments.set]
-        processes["simulator"] = start_service(
-            "simulator", router.endpoint, log_dir, *[item for pair in settings for item in ("--set", pair)])
-        liveliness.wait("simulator", timeout=60)
+        session = open_session([system.endpoint], open_timeout=10)
+        stats = StatsStream(session, "simulator")
+        detector_stats = StatsStream(session, "detector")
         stats.wait_count(WARM_UP_STATS, 60)
-        cpu_start = {name: cpu_seconds(process.popen.pid) for name, process in processes.items()}
+        cpu_start = {name: cpu_seconds(system.pid(name)) for name in services}
         wall_start = time.monotonic()
         messages = stats.wait_count(WARM_UP_STATS + arguments.seconds, arguments.seconds + 30)
         wall = time.monotonic() - wall_start
-        cpu = {name: (cpu_seconds(process.popen.pid) - cpu_start[name]) / wall
-               for name, process in processes.items()}
+        cpu = {name: (cpu_seconds(system.pid(name)) - cpu_start[name]) / wall for name in services}
         first, last = messages[WARM_UP_STATS - 1], messages[-1]
         wall_span = (last["stamp"] - first["stamp"]) / 1e9
         simulated = (last["frames"] - first["frames"]) / arguments.rate
@@ -81,15 +96,16 @@ def run(arguments, log_dir: Path) -> int:
         print("  CPU (cores): " + ", ".join(f"{name} {share:.2f}" for name, share in cpu.items())
               + f"; machine has {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}")
     finally:
-        codes = {name: process.stop() for name, process in reversed(list(processes.items()))}
-        session.close()
-        codes["router"] = router.stop()
-        print("  exit statuses: " + ", ".join(f"{name} {code}" for name, code in codes.items()))
-    return 0 if not any(codes.values()) else 1
+        if session is not None:
+            session.close()
+        code = system.stop()
+        print("  exit statuses: " + ", ".join(f"{name} {child['last_exit']}"
+                                              for name, child in system.children().items()))
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.realtime_check", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.realtime_check", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=int, default=20, help="measured wall seconds (default 20)")
     parser.add_argument("--width", type=int, default=640)
@@ -99,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--alone", action="store_true", help="no detector, locator or follower")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="another simulator setting, repeatable")
-    parser.add_argument("--log-dir", help="keep the processes' logs here (default: a temporary directory)")
+    parser.add_argument("--log-dir", help="keep the run folder (processes' logs) here (default: a temporary one)")
     arguments = parser.parse_args(argv)
     if arguments.log_dir:
         Path(arguments.log_dir).mkdir(parents=True, exist_ok=True)

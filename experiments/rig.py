@@ -330,13 +330,6 @@ class ClosedLoop:
         return frame
 
 
-def heading_error(robot: tuple[float, float, float], target_xy) -> float:
-    """Angle (rad, absolute) between the robot's heading and the direction to ``target_xy``."""
-    x, y, yaw = robot
-    bearing = math.atan2(target_xy[1] - y, target_xy[0] - x)
-    return abs((bearing - yaw + math.pi) % (2 * math.pi) - math.pi)
-
-
 def draw_detections(image_bgr: np.ndarray, detections: list[Detection], path: Path) -> None:
     """Save a frame with the detections drawn on it (for diagnosing false detections)."""
     picture = image_bgr.copy()

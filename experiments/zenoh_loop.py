@@ -1,8 +1,9 @@
 """Closed-loop runs over Zenoh: the real service processes, the simulator in lockstep pacing.
 
-:class:`ZenohLoop` starts a router on a free local port and the simulator (``pacing =
-lockstep``, so that the results do not depend on the machine's load), detector, locator and
-follower (``use_sim_time``) processes, then runs one scenario after another:
+:class:`ZenohLoop` starts, with the system launcher (``deploy/launcher.py``), a router on a free
+local port and the detector, locator, follower (``use_sim_time``) and simulator (``pacing =
+lockstep``, so that the results do not depend on the machine's load) processes, then runs one
+scenario after another:
 
 1. ``reset`` to an empty scenario (no ball) for 1.2 simulated seconds, so that the follower's
    detection timeout passes and the next run starts from a lost target, as a fresh start would;
@@ -10,19 +11,13 @@ follower (``use_sim_time``) processes, then runs one scenario after another:
 3. judge every ``sim/ground_truth`` frame until the run is over, recording ``cmd_vel`` (and
    ``detected_ball_3d`` for a recorded run).
 
-Process logs go to a temporary folder; a failure message quotes the tail of the logs.
+Process logs go to a temporary run folder; a failure message quotes the end of the logs.
 """
 
 import math
-import os
 import queue
-import signal
-import socket
-import subprocess
-import sys
 import tempfile
 import threading
-import time
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -30,6 +25,7 @@ from typing import Any
 import msgpack
 
 from balltrack.common import keys
+from balltrack.deploy.launcher import System, start_system
 from balltrack.experiments.rig import scenario_data, write_scenario
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.follower.config import FollowerConfig
@@ -37,12 +33,6 @@ from balltrack.services.follower.config import FollowerConfig
 STARTUP_TIMEOUT = 90.0
 STALL_TIMEOUT = 20.0
 SETTLE_SECONDS = 1.2
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def _setting(value: Any) -> str:
@@ -53,45 +43,11 @@ def _setting(value: Any) -> str:
     return str(value)
 
 
-def config_arguments(config, skip: tuple[str, ...] = ()) -> list[str]:
-    """``--set key=value`` for every field of ``config`` that differs from the defaults."""
+def config_settings(config, skip: tuple[str, ...] = ()) -> list[str]:
+    """``key=value`` for every field of ``config`` that differs from the defaults."""
     defaults = type(config)()
-    arguments = []
-    for item in fields(config):
-        value = getattr(config, item.name)
-        if item.name not in skip and value != getattr(defaults, item.name):
-            arguments += ["--set", f"{item.name}={_setting(value)}"]
-    return arguments
-
-
-class _Process:
-    def __init__(self, name: str, arguments: list[str], log_dir: Path):
-        self.name = name
-        self.log_path = log_dir / f"{name}.log"
-        self._log = open(self.log_path, "wb")
-        environment = dict(os.environ)
-        environment.setdefault("MUJOCO_GL", "egl")
-        environment["PYTHONUNBUFFERED"] = "1"
-        self.popen = subprocess.Popen([sys.executable, *arguments], stdout=self._log,
-                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                      env=environment)
-
-    def tail(self, lines: int = 8) -> str:
-        text = self.log_path.read_text(errors="replace").strip().splitlines()
-        return " | ".join(text[-lines:])
-
-    def running(self) -> bool:
-        return self.popen.poll() is None
-
-    def stop(self) -> None:
-        if self.popen.poll() is None:
-            self.popen.send_signal(signal.SIGTERM)
-            try:
-                self.popen.wait(15)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait()
-        self._log.close()
+    return [f"{item.name}={_setting(getattr(config, item.name))}" for item in fields(config)
+            if item.name not in skip and getattr(config, item.name) != getattr(defaults, item.name)]
 
 
 class ZenohLoop:
@@ -104,7 +60,7 @@ class ZenohLoop:
         self.simulator_settings = simulator_settings or {}
         self._temporary = tempfile.TemporaryDirectory(prefix="balltrack-tracking-")
         self.folder = Path(self._temporary.name)
-        self.processes: list[_Process] = []
+        self.system: System | None = None
         self.session = None
         self._subscribers = []
         self._truths: queue.Queue = queue.Queue()
@@ -130,26 +86,16 @@ class ZenohLoop:
     def _start(self) -> None:
         from balltrack.common.session import open_session
 
-        port = _free_port()
-        endpoint = f"tcp/127.0.0.1:{port}"
-        router = _Process("router", ["-m", "balltrack", "router", "--listen", endpoint], self.folder)
-        self.processes.append(router)
-        self._wait_for_log(router, "listening on", 30)
         self.blank = write_scenario(scenario_data(name="blank", description="no ball"),
                                     self.folder / "blank.toml")
         simulator_sets = {"scenario": str(self.blank), "pacing": "lockstep",
                           **self.simulator_settings}
-        sim_arguments = [item for key, value in simulator_sets.items()
-                         for item in ("--set", f"{key}={_setting(value)}")]
-        follower_arguments = config_arguments(self.follower, skip=("use_sim_time",))
-        follower_arguments += ["--set", "use_sim_time=true"]
-        for name, extra in (("simulator", sim_arguments),
-                            ("detector", config_arguments(self.detector)),
-                            ("locator", []), ("follower", follower_arguments)):
-            self.processes.append(_Process(name, ["-m", f"services.{name}", "--connect", endpoint,
-                                                  *extra], self.folder))
-        self.session = open_session([endpoint], open_timeout=10)
-        self._wait_alive(("simulator", "detector", "locator", "follower"))
+        settings = {"simulator": [f"{key}={_setting(value)}" for key, value in simulator_sets.items()],
+                    "detector": config_settings(self.detector),
+                    "follower": [*config_settings(self.follower, skip=("use_sim_time",)), "use_sim_time=true"]}
+        self.system = start_system(self.folder / "run", settings=settings, wait=STARTUP_TIMEOUT,
+                                   output=None)
+        self.session = open_session([self.system.endpoint], open_timeout=10)
 
         def on_truth(sample) -> None:
             self._truths.put(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
@@ -169,33 +115,6 @@ class ZenohLoop:
                              self.session.declare_subscriber(keys.CMD_VEL, on_command),
                              self.session.declare_subscriber(keys.DETECTED_BALL_3D, on_estimate)]
 
-    def _wait_for_log(self, process: _Process, text: str, timeout: float) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if text in process.log_path.read_text(errors="replace"):
-                return
-            if not process.running():
-                raise RuntimeError(f"{process.name} exited: {process.tail()}")
-            time.sleep(0.1)
-        raise RuntimeError(f"{process.name}: no {text!r} in {timeout:g} s: {process.tail()}")
-
-    def _wait_alive(self, names: tuple[str, ...]) -> None:
-        deadline = time.monotonic() + STARTUP_TIMEOUT
-        alive: set[str] = set()
-        while time.monotonic() < deadline:
-            alive = set()
-            for reply in self.session.liveliness().get("alive/*", timeout=2.0):
-                if reply.ok is not None:
-                    alive.add(str(reply.ok.key_expr).split("/", 1)[1])
-            if all(name in alive for name in names):
-                return
-            for process in self.processes:
-                if not process.running():
-                    raise RuntimeError(f"{process.name} exited: {process.tail()}")
-            time.sleep(0.5)
-        missing = [name for name in names if name not in alive]
-        raise RuntimeError(f"services not alive after {STARTUP_TIMEOUT:g} s: {', '.join(missing)}")
-
     def close(self) -> None:
         for subscriber in self._subscribers:
             try:
@@ -206,10 +125,9 @@ class ZenohLoop:
         if self.session is not None:
             self.session.close()
             self.session = None
-        # Services first, the router last.
-        for process in reversed(self.processes):
-            process.stop()
-        self.processes = []
+        if self.system is not None:
+            self.system.stop()  # services first, the router last
+            self.system = None
         self._temporary.cleanup()
 
     # -- runs -----------------------------------------------------------------------------------
@@ -225,10 +143,12 @@ class ZenohLoop:
         try:
             return self._truths.get(timeout=STALL_TIMEOUT)
         except queue.Empty:
-            dead = [process.name for process in self.processes if not process.running()]
-            raise RuntimeError(f"no ground truth for {STALL_TIMEOUT:g} s (exited: "
-                               f"{', '.join(dead) or 'none'}); simulator log: "
-                               f"{self.processes[1].tail()}") from None
+            troubled = [f"{name} {child['state']} ({child['restarts']} restarts)"
+                        for name, child in self.system.children().items()
+                        if child["state"] != "running" or child["restarts"]]
+            log = self.system.log("simulator", 8).replace("\n", " | ")
+            raise RuntimeError(f"no ground truth for {STALL_TIMEOUT:g} s (not running or restarted: "
+                               f"{', '.join(troubled) or 'none'}); simulator log: {log}") from None
 
     def _drain(self) -> None:
         while True:
@@ -276,7 +196,7 @@ class ZenohLoop:
             robot = (truth["robot"]["x"], truth["robot"]["y"], truth["robot"]["yaw"])
             ball = truth["balls"][0]
             truths.append((stamp, elapsed, robot, ball))
-            if judge.update(elapsed, robot, ball["position"]):
+            if judge.update(elapsed, truth):
                 break
         self._record = False
         with self._lock:
