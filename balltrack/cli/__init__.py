@@ -21,7 +21,7 @@
 import argparse
 import sys
 
-from balltrack.cli import config, introspect, network, offline, output, publish, run, topics
+from balltrack.cli import config, introspect, network, offline, output, publish, recording, run, topics
 from balltrack.common.keys import Keys
 from balltrack.common.session import ArgumentParser
 
@@ -54,6 +54,7 @@ def build_parser() -> ArgumentParser:
     introspect.register(commands)
     publish.register(commands)
     offline.register(commands)
+    recording.register(commands)
     for name, (help_text, _) in DELEGATED.items():
         commands.add_parser(name, help=help_text, add_help=False)
     return parser

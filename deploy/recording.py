@@ -1,0 +1,174 @@
+"""Recording Zenoh keys into an MCAP file and playing one back (the file side is
+``common/recording.py``). Used by ``balltrack record`` / ``play`` and by the demo (run.mcap).
+
+A :class:`Recording` subscribes to keys on an open session and writes what arrives; Zenoh's
+callbacks only take the arrival time and queue the payload, a thread of its own compresses and
+writes, so a recording never slows the subscriber it shares a session with (the demo's). When
+the writer falls behind by more than ``max_queued`` messages the newest are dropped and counted
+rather than memory growing without bound.
+
+:func:`play` publishes a recording's payloads, byte for byte, with the recorded timing (log-time
+differences divided by ``rate``) or as fast as possible (``rate`` 0).
+"""
+
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import zenoh
+
+from balltrack.common.keys import SERVICES, TABLE, Keys, stats_key
+from balltrack.common.recording import Recorder, RecordingFile
+
+# Every key whose messages have a schema: the fixed data keys of the contract, then stats.
+DATA_KEYS = tuple(spec.key for spec in TABLE if "<" not in spec.key and "->" not in spec.message)
+DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
+
+
+@dataclass
+class RecordingCounts:
+    received: int = 0
+    written: int = 0
+    dropped: int = 0  # the writer was more than max_queued messages behind
+    per_topic: dict[str, int] = field(default_factory=dict)
+
+
+class Recording:
+    """Records ``keys`` (contract keys without namespace, or key expressions) under
+    ``namespace`` from ``session`` into ``path`` until :meth:`close`."""
+
+    def __init__(self, session, path, keys: Iterable[str] = DEFAULT_KEYS, namespace: str = "",
+                 max_queued: int = 1000, metadata: dict[str, str] | None = None):
+        self.keys = Keys(namespace)
+        self.recorder = Recorder(path, metadata={"namespace": self.keys.namespace,
+                                                 **(metadata or {})})
+        self.counts = RecordingCounts()
+        self._queue: queue.Queue = queue.Queue(maxsize=max_queued)
+        self._lock = threading.Lock()
+        self._writer = threading.Thread(target=self._write_queued, name="recording-writer",
+                                        daemon=True)
+        self._writer.start()
+        self._subscribers = []
+        try:
+            for key in dict.fromkeys(keys):
+                self._subscribers.append(session.declare_subscriber(self.keys(key), self._on_sample))
+        except Exception:
+            self.close()
+            raise
+
+    def _on_sample(self, sample) -> None:
+        arrival = time.time_ns()
+        try:
+            self._queue.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), arrival))
+            counted = "received"
+        except queue.Full:
+            counted = "dropped"
+        with self._lock:
+            setattr(self.counts, counted, getattr(self.counts, counted) + 1)
+
+    def _write_queued(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            topic, payload, arrival = item
+            key = self.keys.strip(topic)
+            channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace,
+                                                    self.keys.message_of(topic))
+            self.recorder.write_payload(channel, payload, arrival)
+            with self._lock:
+                self.counts.written += 1
+                self.counts.per_topic[topic] = self.counts.per_topic.get(topic, 0) + 1
+
+    def close(self) -> RecordingCounts:
+        """Stop subscribing, write what is queued, finalise the file; returns the counts."""
+        for subscriber in self._subscribers:
+            try:
+                subscriber.undeclare()
+            except Exception:  # the session may be closed already; the file still gets finished
+                pass
+        self._subscribers = []
+        if self._writer.is_alive():
+            self._queue.put(None)  # blocks only while the writer drains a full queue
+            self._writer.join()
+        self.recorder.close()
+        return self.counts
+
+
+@dataclass
+class PlayCounts:
+    published: int = 0
+    passes: int = 0
+    per_topic: dict[str, int] = field(default_factory=dict)
+
+
+def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> list[str]:
+    """The recorded topics to play: all, or those whose topic or key (without the recorded
+    namespace) is in ``wanted``. ValueError names a wanted key the recording lacks."""
+    channels = recording.channels()
+    if not wanted:
+        return [channel.topic for channel in channels]
+    chosen = []
+    for name in wanted:
+        matches = [channel.topic for channel in channels if name in (channel.topic, channel.key)]
+        if not matches:
+            recorded = ", ".join(channel.topic for channel in channels) or "none"
+            raise ValueError(f"{name!r} is not in the recording (recorded: {recorded})")
+        chosen.extend(match for match in matches if match not in chosen)
+    return chosen
+
+
+def play(session, recording: RecordingFile, stop: threading.Event, rate: float = 1.0,
+         loop: bool = False, topics: Iterable[str] | None = None, start_seconds: float = 0.0,
+         namespace: str | None = None,
+         on_message: Callable[[str, int], None] | None = None) -> PlayCounts:
+    """Publish the recording until it ends (or forever with ``loop``) or ``stop`` is set.
+
+    Each pass starts ``start_seconds`` after the recording's first message; the wait before a
+    message is its log-time distance from the pass's first one, divided by ``rate`` (0: no
+    wait). ``namespace`` (when not None) replaces the recorded one. Payloads are put with
+    congestion control BLOCK: a recording is replayed whole, a slow link slows the replay.
+    """
+    topics = list(topics) if topics is not None else None
+    target = Keys(namespace) if namespace is not None else None
+    publishers: dict[str, object] = {}
+    counts = PlayCounts()
+    summary = recording.summary(rates=False)
+    if summary.start_ns is None:
+        return counts
+    start_ns = summary.start_ns + int(start_seconds * 1e9)
+    try:
+        while not stop.is_set():
+            first_log = None
+            wall_start = time.monotonic()
+            for message in recording.messages(topics, start_ns):
+                if first_log is None:
+                    first_log, wall_start = message.log_time, time.monotonic()
+                if rate > 0:
+                    due = wall_start + (message.log_time - first_log) / 1e9 / rate
+                    delay = due - time.monotonic()
+                    if delay > 0 and stop.wait(delay):
+                        break
+                if stop.is_set():
+                    break
+                key = target(message.key) if target is not None else message.topic
+                publisher = publishers.get(key)
+                if publisher is None:
+                    publisher = publishers[key] = session.declare_publisher(
+                        key, congestion_control=zenoh.CongestionControl.BLOCK)
+                publisher.put(message.payload)
+                counts.published += 1
+                counts.per_topic[key] = counts.per_topic.get(key, 0) + 1
+                if on_message is not None:
+                    on_message(key, len(message.payload))
+            else:
+                counts.passes += 1
+                if loop and first_log is not None:
+                    continue
+            break
+    finally:
+        for publisher in publishers.values():
+            publisher.undeclare()
+    return counts
