@@ -12,8 +12,8 @@ simulated time: ``common/referee.py``) or when the time limit (wall seconds) is 
 Into the run folder go the services' logs, ``video.mp4`` (the detector's annotated camera
 frames, ``image_out``, with the locator's 3D estimate written on them), ``trajectory.png``
 (the ball in the camera frame over time and the robot's path, like the paper's Fig. 8),
-``velocity.png`` (linear and angular velocity over time, like its Fig. 6), ``frame.png`` and
-``summary.json``. Exit status 0 when the ball was reached, 1 otherwise.
+``velocity.png`` (linear and angular velocity over time, like its Fig. 6), ``frame.png``,
+``summary.json`` and ``run.mcap`` (the messages, for ``balltrack play`` and ``balltrack info``). Exit status 0 when the ball was reached, 1 otherwise.
 
 Latency is measured here, by wall-clock arrival times at this program's own subscriber: the
 simulator's header stamps are *simulated* time, so they cannot be compared with the wall
@@ -45,6 +45,7 @@ from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING
 from balltrack.common.session import ArgumentParser, open_session
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.launcher import SERVICES, start_system
+from balltrack.deploy.recording import DEFAULT_KEYS, Recording
 
 DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
 # Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
@@ -52,6 +53,10 @@ DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
 COUNTED_KEYS = (key_table.IMAGE_RAW, key_table.CAMERA_INFO, key_table.DETECTED_BALL,
                 key_table.DETECTED_BALLS, key_table.DETECTED_BALL_3D, key_table.CMD_VEL,
                 key_table.IMAGE_OUT, key_table.CLOCK, key_table.GROUND_TRUTH)
+# run.mcap (`balltrack play`, `balltrack info`): every data and stats key but image_tuning (as
+# above) and image_out (video.mp4 shows it; the raw frames are enough to replay the run).
+RECORDED_KEYS = tuple(key for key in DEFAULT_KEYS
+                      if key not in (key_table.IMAGE_TUNING, key_table.IMAGE_OUT))
 
 
 def percentile(values: list[float], q: float) -> float | None:
@@ -286,7 +291,7 @@ def run(args) -> int:
 
     referee = Referee(args.reach_distance, args.reach_heading, args.hold)
     system = None
-    session = observer = video = None
+    session = observer = video = recording = None
     reached = False
     started_wall = time.monotonic()
     result: dict = {}
@@ -306,6 +311,7 @@ def run(args) -> int:
         if video is not None:
             video.start()
         observer = Observer(session, args.namespace, referee, video)
+        recording = Recording(session, run_dir / "run.mcap", RECORDED_KEYS, args.namespace)
         # The pipeline is up once the detector answers frames; then the scenario restarts so the
         # run starts with every service ready.
         if not wait_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
@@ -349,6 +355,8 @@ def run(args) -> int:
     finally:
         if observer is not None:
             observer.close()
+        if recording is not None:
+            recording.close()
         if session is not None:
             session.close()
         if system is not None:
