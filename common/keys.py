@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 # What `python -m deploy start` runs by default; the ROS 2 bridge is started on request.
 CORE_SERVICES = ("detector", "locator", "follower", "simulator")
-SERVICES = (*CORE_SERVICES, "ros2_bridge")
+# The camera publishes what the simulator does, from a real camera: one or the other runs.
+SERVICES = (*CORE_SERVICES, "ros2_bridge", "camera")
 
 IMAGE_RAW = "camera/image_raw"
 CAMERA_INFO = "camera/camera_info"
@@ -33,8 +34,8 @@ class KeySpec:
 
 
 TABLE: tuple[KeySpec, ...] = (
-    KeySpec(IMAGE_RAW, "Image", "simulator, or any camera", "every frame (30 Hz default)"),
-    KeySpec(CAMERA_INFO, "CameraInfo", "simulator", "1 Hz, and answered as a query"),
+    KeySpec(IMAGE_RAW, "Image", "simulator or camera", "every frame (30 Hz default)"),
+    KeySpec(CAMERA_INFO, "CameraInfo", "simulator or camera", "1 Hz, and answered as a query"),
     KeySpec(DETECTED_BALL, "Ball2D", "detector", "each frame with a ball: the largest one"),
     KeySpec(DETECTED_BALLS, "Ball2DArray", "detector", "every frame, empty list when none"),
     KeySpec(DETECTED_BALL_3D, "Ball3D", "locator", "each detected_ball"),

@@ -15,13 +15,15 @@
     balltrack delay detected_ball_3d            # age of header stamps
     balltrack sim set_light diffuse=0.1         # drive the simulator
     balltrack detect photo1.jpg photo2.jpg      # the detector offline
+    balltrack calibrate board*.jpg --board 9x6 --square 0.025 -o camera.yaml
     balltrack experiment range --quick --out runs/range
 """
 
 import argparse
 import sys
 
-from balltrack.cli import config, introspect, network, offline, output, publish, recording, run, topics
+from balltrack.cli import (calibrate, config, introspect, network, offline, output, publish, recording, run,
+                           topics)
 from balltrack.common.keys import Keys
 from balltrack.common.session import ArgumentParser
 
@@ -54,6 +56,7 @@ def build_parser() -> ArgumentParser:
     introspect.register(commands)
     publish.register(commands)
     offline.register(commands)
+    calibrate.register(commands)
     recording.register(commands)
     for name, (help_text, _) in DELEGATED.items():
         commands.add_parser(name, help=help_text, add_help=False)

@@ -1,0 +1,5 @@
+import sys
+
+from balltrack.services.camera.service import main
+
+sys.exit(main())

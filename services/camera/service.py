@@ -1,0 +1,104 @@
+"""Camera service: a real camera (or a video, photos, a stream) as ``camera/image_raw``.
+
+Publishes: ``camera/image_raw`` (Image, ``encoding`` jpeg by default; header stamp = wall time
+of the read, seq = frame index from 0, frame_id "camera") and ``camera/camera_info``
+(CameraInfo, intrinsics from ``calibration`` or the ideal pinhole of ``hfov``, with the
+distortion model) with the first frame and then once a second; ``camera/camera_info`` is also
+answered as a query, as the simulator does. Stats add ``frames``, ``disconnects`` and
+``reconnects`` (a live source that stopped delivering and was reopened), ``skipped_frames``
+(live frames left out to keep to ``rate_hz``), ``rewinds`` and ``unreadable_files``.
+
+A source that cannot be opened, or a calibration file that cannot be read or does not fit the
+frames, is one line on stderr and exit status 2. The end of a video or of the photos exits 0
+(``loop`` starts them again); a device or stream that disappears is reopened with backoff.
+
+Example:
+    balltrack run camera --set source=/dev/video0 --set width=640 --set height=480 \\
+        --set calibration=camera.yaml
+"""
+
+import time
+
+from balltrack.common import keys
+from balltrack.common.config import ConfigError
+from balltrack.common.images import bgr_to_message
+from balltrack.common.messages import MessageError, encode, header
+from balltrack.common.runner import ServiceContext, run_service
+from balltrack.services.camera.calibration import CameraModel, pinhole, read_calibration
+from balltrack.services.camera.config import LIVE_SETTINGS, CameraConfig
+from balltrack.services.camera.source import FrameFeed, SourceError, open_source
+
+
+def build(service: ServiceContext):
+    config: CameraConfig = service.config
+    try:
+        calibration = read_calibration(config.calibration) if config.calibration else None
+        spec, reader = open_source(config.source, config.width, config.height)
+    except (SourceError, ValueError) as error:
+        raise ConfigError(str(error)) from None
+    started_with = config
+    images = service.publisher(keys.IMAGE_RAW, "Image")
+    infos = service.publisher(keys.CAMERA_INFO, "CameraInfo")
+    feed = FrameFeed(spec, reader, lambda: service.config, service.stop, service.log)
+    models: dict[tuple[int, int], CameraModel] = {}
+    latest: dict[str, dict] = {}
+
+    def model_for(width: int, height: int) -> CameraModel:
+        if (width, height) not in models:
+            try:
+                models[width, height] = (calibration.scaled_to(width, height) if calibration
+                                         else pinhole(width, height, started_with.hfov))
+            except ValueError as error:
+                raise ConfigError(f"calibration: {error}") from None
+            if calibration and (width, height) != (calibration.width, calibration.height):
+                service.log.warning("frames are %dx%d, the calibration %dx%d: intrinsics scaled",
+                                    width, height, calibration.width, calibration.height)
+        return models[width, height]
+
+    def on_camera_info_query(query) -> None:
+        if "info" in latest:  # before the first frame the size is not known: no answer
+            query.reply(query.key_expr, encode("CameraInfo", latest["info"]))
+
+    def on_config_change(new: CameraConfig) -> None:
+        for name in sorted(set(vars(new)) - LIVE_SETTINGS):
+            if getattr(new, name) != getattr(started_with, name):
+                service.log.warning("%s: the running camera keeps %r until a restart",
+                                    name, getattr(started_with, name))
+
+    service.queryable(keys.CAMERA_INFO, on_camera_info_query)
+    service.on_config_change(on_config_change)
+    service.stats.extra = feed.stats
+
+    def loop(context: ServiceContext) -> None:
+        next_info = 0.0
+        try:
+            for seq, image in enumerate(feed):
+                started = time.perf_counter()
+                stamp = time.time_ns()
+                settings = context.config
+                height, width = image.shape[:2]
+                info = {"header": header(stamp, seq), **model_for(width, height).camera_info()}
+                latest["info"] = info
+                try:
+                    message = bgr_to_message(image, stamp, seq, "camera", str(settings.encoding),
+                                             settings.jpeg_quality)
+                except MessageError as error:  # e.g. a photo larger than the contract allows
+                    context.reject(context.keys(keys.IMAGE_RAW), f"frame {seq}: {error}")
+                    continue
+                images.put(message)
+                now = time.monotonic()
+                if now >= next_info:
+                    infos.put(info)
+                    next_info = now + 1.0
+                context.stats.record_duration(time.perf_counter() - started)
+        finally:
+            reader.close()
+        if feed.ended:
+            context.log.info("end of %s %s after %d frames", spec.kind, spec.target, feed.frames)
+            context.stop.set()
+
+    return loop
+
+
+def main(argv=None) -> int:
+    return run_service("camera", CameraConfig, build, argv, __doc__)
