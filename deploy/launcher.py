@@ -17,6 +17,7 @@ restarted by the supervisor; one stopped with :meth:`System.stop_service` stays 
 import os
 import signal
 import sys
+import time
 from pathlib import Path
 
 from balltrack.common.network import free_port
@@ -49,12 +50,21 @@ class System:
         """The end of ``name``'s log."""
         return tail(self.run_dir / f"{name}.log", lines)
 
-    def stop_service(self, name: str) -> None:
-        """SIGTERM to one process: it exits 0, which the supervisor does not restart."""
+    def stop_service(self, name: str, timeout: float = 30.0) -> dict:
+        """SIGTERM to one process (``router`` or a service), then wait until the supervisor
+        has seen it exit; its status. Exit 0, a clean stop, is not restarted."""
         pid = self.pid(name)
         if pid is None:
             raise LaunchError(f"{name} is not running (no {name}.pid in {self.run_dir})")
         os.kill(pid, signal.SIGTERM)
+        deadline = time.monotonic() + timeout
+        while True:
+            child = self.children().get(name, {})
+            if child.get("pid") != pid:
+                return child
+            if time.monotonic() > deadline:
+                raise LaunchError(f"{name} (pid {pid}) still running {timeout:g} s after SIGTERM")
+            time.sleep(0.05)  # polling the status file the supervisor rewrites; bounded by the deadline
 
     def stop(self, timeout: float = 40.0) -> int:
         """Stop everything (services, then the router); the supervisor's exit status: 0 when

@@ -6,7 +6,6 @@ token, a message) with a deadline, and fails the test with what it was waiting f
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -17,16 +16,11 @@ import zenoh
 
 from balltrack.common.keys import Keys
 from balltrack.common.messages import decode, encode
+from balltrack.common.network import free_port  # noqa: F401  (tests import it from here too)
 from balltrack.common.session import open_session
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def process_environment() -> dict:

@@ -155,8 +155,10 @@ class NetworkNamespaces:
 
     def free_port(self, host: str) -> int:
         """A TCP port that nothing listens on at ``host``'s address, asked of its kernel."""
-        probe = ("import socket; s = socket.socket(); "
-                 f"s.bind(({self.addresses[host]!r}, 0)); print(s.getsockname()[1])")
+        # common.network.free_port, run inside the namespace: each namespace has its own ports,
+        # so asking in ours would say nothing about the host's.
+        probe = ("from balltrack.common.network import free_port; "
+                 f"print(free_port(host={self.addresses[host]!r}))")
         result = self.run(host, [sys.executable, "-c", probe])
         if result.returncode != 0:
             raise NetnsError(f"free port on {host}: {result.stderr.strip()}")

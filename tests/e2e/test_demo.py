@@ -6,7 +6,8 @@ import sys
 
 import pytest
 
-from tests.harness import REPO, free_port, process_environment
+from balltrack.common.network import free_port
+from tests.harness import REPO, process_environment
 
 pytestmark = pytest.mark.slow
 

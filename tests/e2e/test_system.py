@@ -1,13 +1,19 @@
 """The whole system: a real router and every service as a separate process, no mocks.
 
+Every system here is started by the launcher the demo and the experiments use
+(``balltrack.deploy.launcher``: router on a free port, services under the supervisor, each
+alive before the next starts) and judged by their referee (``balltrack.common.referee``).
+
 * The robot reaches the ball (ground truth) in the ``chase`` and ``search`` scenarios within
   30 s of simulated time. The simulator runs in lockstep and the follower on simulated time,
-  so the run is the same whatever the machine's load.
+  so the run is the same whatever the machine's load. The simulator starts on a scenario with
+  no ball and is reset to the test's once the test listens, so the run is seen from its first
+  frame, with a follower that has never seen a ball.
 * The locator's ``detected_ball_3d`` agrees with the ground truth of the same frame.
 * When the frames stop, the follower searches; when its commands stop, the simulator's safety
   stop halts the robot.
-* Under the deploy supervisor: a SIGKILLed locator does not disturb the follower and comes
-  back; a restarted router is rejoined by every client within 2 s.
+* Under the supervisor: a SIGKILLed locator does not disturb the follower and comes back; a
+  restarted router is rejoined by every client within 2 s.
 
 Frames are 320x240 (the default field of view) except in the chase run, whose locator
 estimates are checked at the default 640x480. One chase run serves three tests, and one
@@ -15,13 +21,10 @@ supervised system two. Every wait is on a condition (messages, liveliness, groun
 a deadline. Figures are printed with ``E2E`` in front (``pytest -s``).
 """
 
-import json
 import math
 import os
 import signal
 import statistics
-import subprocess
-import sys
 import threading
 import time
 import tomllib
@@ -30,9 +33,13 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from balltrack.common.geometry import wrap_angle
 from balltrack.common.messages import decode
+from balltrack.common.referee import Referee, errors
+from balltrack.deploy.launcher import start_system
+from balltrack.experiments.rig import scenario_data, write_scenario
 from balltrack.services.simulator.control import send_command
-from tests.harness import REPO, Liveliness, Router, client, process_environment, query_config, start_service
+from tests.harness import REPO, Liveliness, Router, client, query_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -43,15 +50,11 @@ SIMULATOR = ("pacing=lockstep", f"hfov={HFOV}", "image_noise=2", "seed=1", "lock
 # default size (at 320x240 a ball 2 m away is 4.4 px in radius: 5 % of its distance is 0.2 px).
 SMALL = (320, 240)
 FULL = (640, 480)
-# The demo's follower settings (max_size_thresh 0.3 stops close enough to call the ball
-# reached), on simulated time whatever the demo says, which lockstep needs.
-FOLLOWER = ("--config", str(DEMO_CONFIG / "follower.toml"), "--set", "use_sim_time=true")
-LOCATOR = ("--config", str(DEMO_CONFIG / "locator.toml"))
+# The demo's parameter files (the follower's max_size_thresh 0.3 stops close enough to call the
+# ball reached), the follower on simulated time whatever the demo says, which lockstep needs.
+FOLLOWER = ("use_sim_time=true",)
 FOLLOWER_SETTINGS = tomllib.loads((DEMO_CONFIG / "follower.toml").read_text())
-REACH_DISTANCE = 0.35  # m, robot centre to ball centre (on the floor)
-REACH_HEADING = math.radians(10)
 REACH_LIMIT = 30.0  # simulated seconds
-HOLD = 1.0  # simulated seconds the reach must hold, so a pass-by does not count
 PERIOD = 1 / 30
 TICK = 0.1  # the follower's timer (10 Hz)
 
@@ -60,34 +63,20 @@ def report(text: str) -> None:
     print(f"\nE2E {text}", flush=True)
 
 
-def sets(*settings: str) -> list[str]:
-    return [item for setting in settings for item in ("--set", setting)]
-
-
-def wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
 def seconds(message: dict) -> float:
     return message["header"]["stamp"] / 1e9
-
-
-def errors(truth: dict) -> tuple[float, float]:
-    """(robot centre to ball centre on the floor in m, heading error in rad)."""
-    robot, ball = truth["robot"], truth["balls"][0]["position"]
-    dx, dy = ball[0] - robot["x"], ball[1] - robot["y"]
-    return math.hypot(dx, dy), abs(wrap(math.atan2(dy, dx) - robot["yaw"]))
 
 
 def moved(before: dict, after: dict) -> float:
     """How far the robot moved between two ground truths (metres + radians)."""
     first, last = before["robot"], after["robot"]
     return (abs(last["x"] - first["x"]) + abs(last["y"] - first["y"])
-            + abs(wrap(last["yaw"] - first["yaw"])))
+            + abs(wrap_angle(last["yaw"] - first["yaw"])))
 
 
 class Stream:
-    """Decoded messages of one key with their arrival times (time.monotonic()), and waits."""
+    """Decoded messages of one key with their arrival times (time.monotonic()), and waits;
+    ``keep`` makes what is kept of a message, None to leave it out."""
 
     def __init__(self, session, key: str, message: str, keep=lambda message: message):
         self.items: list[tuple[float, dict]] = []
@@ -99,6 +88,8 @@ class Stream:
                 decoded = keep(decode(message, sample.payload.to_bytes()))
             except ValueError:
                 return  # a malformed message never satisfies a condition
+            if decoded is None:
+                return
             with self._changed:
                 self.items.append((arrival, decoded))
                 self._changed.notify_all()
@@ -143,59 +134,37 @@ def header_only(message: dict) -> dict:
     return {"header": message["header"]}
 
 
-class Referee:
-    """Reads ground truth as it comes: when the robot first reached the ball and held it."""
-
-    def __init__(self):
-        self.seen = 0
-        self.since: float | None = None  # start of the current streak within the criteria
-        self.reached_at: float | None = None
-        self.last: dict | None = None
-
-    def update(self, items) -> bool:
-        """True once the reach held for HOLD, or simulated time is past the limit."""
-        for _, truth in items[self.seen:]:
-            t = seconds(truth)
-            distance, heading = errors(truth)
-            if distance <= REACH_DISTANCE and heading <= REACH_HEADING:
-                self.since = t if self.since is None else self.since
-                if t - self.since >= HOLD and self.reached_at is None:
-                    self.reached_at = self.since
-            else:
-                self.since = None
-            self.last = truth
-        self.seen = len(items)
-        return self.reached_at is not None or (self.last is not None
-                                               and seconds(self.last) > REACH_LIMIT + HOLD)
+def with_balls(truth: dict) -> dict | None:
+    """Ground truth of the test's scenario: the blank one the simulator starts on has no ball."""
+    return truth if truth["balls"] else None
 
 
 class Pipeline:
-    """Detector, locator, follower and simulator as separate processes on one router."""
+    """Router, detector, locator, follower and simulator as separate processes, by the launcher.
 
-    def __init__(self, endpoint: str, log_dir: Path, scenario: str, size: tuple[int, int] = SMALL):
+    The simulator starts on a scenario without a ball; once this test's subscribers are in
+    place it is reset to ``scenario``, whose first frame is at ``origin`` (simulated s)."""
+
+    def __init__(self, log_dir: Path, scenario: str, size: tuple[int, int] = SMALL):
         self.size = size
-        self.session = client(endpoint)
-        self.liveliness = Liveliness(self.session)
-        self.processes: dict = {}
-        self.killed: set[str] = set()
+        blank = write_scenario(scenario_data(name="blank", description="no ball"), log_dir / "blank.toml")
+        simulator = [*SIMULATOR, f"scenario={blank}", f"width={size[0]}", f"height={size[1]}"]
+        started = time.monotonic()
+        self.system = start_system(log_dir / "run", settings={"simulator": simulator, "follower": list(FOLLOWER)},
+                                   config_dir=DEMO_CONFIG, wait=120, output=None)
+        self.session = None
         self.streams: list[Stream] = []
         try:
-            # The pipeline first, so that it is ready for the simulator's first frame.
-            self.processes["detector"] = start_service("detector", endpoint, log_dir)
-            self.processes["locator"] = start_service("locator", endpoint, log_dir, *LOCATOR)
-            self.processes["follower"] = start_service("follower", endpoint, log_dir, *FOLLOWER)
-            for name in ("detector", "locator", "follower"):
-                self.liveliness.wait(name, timeout=90)
-            self.truths = self.stream("sim/ground_truth", "GroundTruth")
+            self.session = client(self.system.endpoint)
+            self.liveliness = Liveliness(self.session)
+            self.truths = self.stream("sim/ground_truth", "GroundTruth", with_balls)
             self.commands = self.stream("cmd_vel", "Twist")
             self.located = self.stream("detected_ball_3d", "Ball3D")
             self.stats = self.stream("simulator/stats", "Stats")
-            started = time.monotonic()
-            self.processes["simulator"] = start_service(
-                "simulator", endpoint, log_dir, *sets(*SIMULATOR, f"scenario={scenario}",
-                                                      f"width={size[0]}", f"height={size[1]}"))
-            self.truths.wait_for(lambda items: items, 90, "the simulator's first frame")
+            assert send_command(self.session, {"op": "reset", "scenario": scenario}) == {"ok": True}
+            first = self.truths.wait_for(lambda items: items, 90, f"the first frame of {scenario}")
             self.first_frame_wall = time.monotonic()
+            self.origin = seconds(first[0][1])
             self.startup_seconds = self.first_frame_wall - started
         except BaseException:
             self.close()
@@ -206,39 +175,36 @@ class Pipeline:
         self.streams.append(stream)
         return stream
 
+    def scenario_commands(self) -> list[dict]:
+        """The follower's commands since the scenario's first frame."""
+        return [command for command in self.commands.messages if command["time"] / 1e9 >= self.origin]
+
     def run_until_reached(self, wall_timeout: float = 400) -> Referee:
-        referee = Referee()
-        self.truths.wait_for(referee.update, wall_timeout, "the robot reaching the ball")
+        """Feed the referee every frame until its verdict is final; it also keeps ``last``."""
+        referee = Referee(time_limit=REACH_LIMIT)
+        judged = 0
+
+        def over(items) -> bool:
+            nonlocal judged
+            for _, truth in items[judged:]:
+                referee.update(seconds(truth) - self.origin, truth)
+                referee.last = truth
+            judged = len(items)
+            return referee.over
+
+        self.truths.wait_for(over, wall_timeout, "the robot reaching the ball")
         self.run_wall_seconds = time.monotonic() - self.first_frame_wall
         return referee
 
-    def kill(self, name: str) -> None:
-        self.processes[name].kill()
-        self.killed.add(name)
-
     def close(self) -> None:
-        """Stop every process (simulator first), even when one of them misbehaves."""
-        problems = []
-        for name in reversed(list(self.processes)):
-            process = self.processes[name]
-            try:
-                code = process.stop()
-            except AssertionError as error:  # it ignored SIGTERM and was killed
-                problems.append(str(error))
-                continue
-            if code != 0 and name not in self.killed:
-                problems.append(f"{name} exited {code}:\n{process.output()[-3000:]}")
+        """Stop every process (services, then the router): all must exit 0."""
         for stream in self.streams:
             stream.close()
-        self.session.close()
-        assert not problems, "services did not stop cleanly:\n" + "\n".join(problems)
-
-
-@pytest.fixture(scope="module")
-def shared_router(tmp_path_factory):
-    running = Router(tmp_path_factory.mktemp("router"))
-    yield running
-    assert running.stop() == 0, running.process.output()
+        if self.session is not None:
+            self.session.close()
+        code = self.system.stop()
+        assert code == 0, (f"the supervisor stopped with status {code}: {self.system.children()}\n"
+                           f"{self.system.log('supervisor', 40)}")
 
 
 def lockstep_timeouts(pipeline: Pipeline) -> int | None:
@@ -248,10 +214,9 @@ def lockstep_timeouts(pipeline: Pipeline) -> int | None:
 
 def reach(pipeline: Pipeline, scenario: str) -> Referee:
     referee = pipeline.run_until_reached()
-    distance, heading = errors(referee.last)
     report(f"{scenario}: reached at {referee.reached_at} s simulated (limit {REACH_LIMIT}); last frame "
-           f"{seconds(referee.last):.2f} s: distance {distance:.3f} m, heading error "
-           f"{math.degrees(heading):.1f} deg; {pipeline.run_wall_seconds:.1f} s wall for "
+           f"{referee.time:.2f} s: distance {referee.distance:.3f} m, heading error "
+           f"{math.degrees(referee.heading):.1f} deg; {pipeline.run_wall_seconds:.1f} s wall for "
            f"{len(pipeline.truths.items)} frames, startup {pipeline.startup_seconds:.1f} s, "
            f"lockstep timeouts {lockstep_timeouts(pipeline)}")
     return referee
@@ -260,7 +225,7 @@ def reach(pipeline: Pipeline, scenario: str) -> Referee:
 def assert_reached(referee: Referee, scenario: str) -> None:
     assert referee.reached_at is not None, (
         f"{scenario}: the robot did not reach the ball within {REACH_LIMIT} s of simulated time; "
-        f"last ground truth {referee.last}, errors {errors(referee.last)}")
+        f"last ground truth {referee.last}, errors {referee.distance, referee.heading}")
     assert referee.reached_at <= REACH_LIMIT
 
 
@@ -283,9 +248,9 @@ def in_full_view(ball: dict, width: int, height: int) -> bool:
 
 # -- chase: reach, locator accuracy, frames stop, commands stop ------------------------------------
 @pytest.fixture(scope="class")
-def chase(shared_router, tmp_path_factory):
+def chase(tmp_path_factory):
     """The chase scenario at the default frame size, run until the robot reached the ball."""
-    pipeline = Pipeline(shared_router.endpoint, tmp_path_factory.mktemp("chase"), "chase", FULL)
+    pipeline = Pipeline(tmp_path_factory.mktemp("chase"), "chase", FULL)
     try:
         pipeline.referee = reach(pipeline, "chase")
         yield pipeline
@@ -296,7 +261,7 @@ def chase(shared_router, tmp_path_factory):
 class TestChase:
     def test_robot_reaches_the_ball(self, chase):
         assert_reached(chase.referee, "chase")
-        assert any(command["mode"] == "chase" for command in chase.commands.messages)
+        assert any(command["mode"] == "chase" for command in chase.scenario_commands())
 
     def test_locator_matches_ground_truth(self, chase):
         truths = {truth["header"]["seq"]: truth for truth in chase.truths.messages}
@@ -361,12 +326,14 @@ class TestChase:
         truths = chase.truths.messages
         end = truths[-1]
         start = next(truth for truth in reversed(truths) if seconds(truth) <= seconds(end) - 0.5)
-        rate = wrap(end["robot"]["yaw"] - start["robot"]["yaw"]) / (seconds(end) - seconds(start))
+        rate = wrap_angle(end["robot"]["yaw"] - start["robot"]["yaw"]) / (seconds(end) - seconds(start))
         assert rate == pytest.approx(direction, rel=0.05), (rate, direction)
 
         # Commands stop: the simulator holds the last one for cmd_timeout of simulated time,
-        # then commands zero; the base decelerates at its limit and stands still.
-        chase.kill("follower")
+        # then commands zero; the base decelerates at its limit and stands still. (SIGTERM: the
+        # supervisor restarts a killed process, not one that exits 0.)
+        stopped = chase.system.stop_service("follower")
+        assert stopped["state"] == "exited" and stopped["last_exit"] == 0, stopped
         chase.liveliness.wait("follower", alive=False, timeout=15)
         last_seen = max(command["time"] for command in chase.commands.messages) / 1e9
         timeout = simulator["cmd_timeout"]
@@ -397,48 +364,33 @@ class TestChase:
         images.close()
 
 
-def test_robot_finds_and_reaches_the_ball_in_search(shared_router, tmp_path):
-    pipeline = Pipeline(shared_router.endpoint, tmp_path, "search")
+def test_robot_finds_and_reaches_the_ball_in_search(tmp_path):
+    pipeline = Pipeline(tmp_path, "search")
     try:
         referee = reach(pipeline, "search")
-        commands = pipeline.commands.messages
+        commands = pipeline.scenario_commands()
     finally:
         pipeline.close()
     assert_reached(referee, "search")
     first_chase = next(command for command in commands if command["mode"] == "chase")
-    assert commands[0]["mode"] == "search" and first_chase["time"] / 1e9 > 1.0, "the ball was in view"
+    assert commands[0]["mode"] == "search", commands[0]
+    assert first_chase["time"] / 1e9 - pipeline.origin > 1.0, "the ball was in view"
 
 
-# -- under the deploy supervisor: a killed locator, a restarted router -----------------------------
-def deploy(*arguments: str, timeout: float = 150.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "balltrack.deploy", *arguments], cwd=REPO,
-                          env=process_environment(), capture_output=True, text=True, timeout=timeout)
-
-
-def read_status(run_dir: Path) -> dict:
-    try:
-        return json.loads((run_dir / "status.json").read_text())
-    except (OSError, ValueError):
-        return {}
-
-
+# -- under the supervisor: a killed locator, a restarted router -------------------------------------
 class Supervised:
-    """Four services under ``python -m deploy`` (demo configuration), on a router of our own."""
+    """The four services (demo configuration) and their router, by the launcher, with this
+    test's subscribers. ``router`` is a router of the test's own once the launched one was
+    stopped (the services then use it on the same port)."""
 
     def __init__(self, log_dir: Path):
         self.log_dir = log_dir
-        self.run_dir = log_dir / "run"
-        self.router = Router(log_dir)
-        self.session = None
-        simulator = (*SIMULATOR, f"width={SMALL[0]}", f"height={SMALL[1]}")
-        result = deploy("start", "--connect", self.router.endpoint, "--run-dir", str(self.run_dir),
-                        "--services", "detector,locator,follower,simulator",
-                        "--config-dir", str(DEMO_CONFIG), "--set", "follower.use_sim_time=true",
-                        *sets(*[f"simulator.{setting}" for setting in simulator]), "--wait", "120")
-        if result.returncode != 0:
-            self.router.stop()
-            raise AssertionError(result.stdout + result.stderr)
-        self.session = client(self.router.endpoint)
+        simulator = [*SIMULATOR, f"width={SMALL[0]}", f"height={SMALL[1]}"]
+        self.launched = start_system(log_dir / "run", settings={"simulator": simulator, "follower": list(FOLLOWER)},
+                                     config_dir=DEMO_CONFIG, wait=120, output=None)
+        self.run_dir = self.launched.run_dir
+        self.router: Router | None = None
+        self.session = client(self.launched.endpoint)
         self.liveliness = Liveliness(self.session)
         self.truths = Stream(self.session, "sim/ground_truth", "GroundTruth")
         self.commands = Stream(self.session, "cmd_vel", "Twist")
@@ -446,21 +398,17 @@ class Supervised:
         self.detected = Stream(self.session, "detected_ball", "Ball2D")
 
     def children(self) -> dict:
-        return read_status(self.run_dir).get("children", {})
+        return self.launched.children()
 
     def close(self) -> None:
         try:
-            result = deploy("stop", "--run-dir", str(self.run_dir))
-            final = read_status(self.run_dir)
+            for stream in (self.truths, self.commands, self.located, self.detected):
+                stream.close()
+            self.session.close()
+            code = self.launched.stop()
         finally:
-            if self.session is not None:
-                for stream in (self.truths, self.commands, self.located, self.detected):
-                    stream.close()
-                self.session.close()
-            router_code = self.router.stop()
-        supervisor_log = (self.run_dir / "supervisor.log").read_text()
-        assert result.returncode == 0, result.stdout + result.stderr + supervisor_log
-        assert final["supervisor"]["exit_code"] == 0, final
+            router_code = self.router.stop() if self.router is not None else 0
+        assert code == 0, f"{self.children()}\n{self.launched.log('supervisor', 40)}"
         assert router_code == 0
 
 
@@ -537,9 +485,10 @@ class TestSupervised:
         watcher = system.session.liveliness().declare_subscriber("alive/*", lambda sample: tokens.append(
             (time.monotonic(), str(sample.key_expr).split("/", 1)[1],
              sample.kind == zenoh.SampleKind.PUT)))
-        port = system.router.port
+        port = int(system.launched.endpoint.rsplit(":", 1)[1])
         stopping = time.monotonic()
-        assert system.router.stop() == 0
+        stopped = system.launched.stop_service("router")  # exit 0: the supervisor leaves it stopped
+        assert stopped["state"] == "exited" and stopped["last_exit"] == 0, stopped
         second_log_dir = system.log_dir / "second-router"
         second_log_dir.mkdir()
         launched = time.monotonic()
