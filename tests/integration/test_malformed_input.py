@@ -45,9 +45,14 @@ def rejected_count(session, service: str, at_least: int) -> int:
         stats.close()
 
 
-def test_config_set_with_a_huge_string_is_answered_by_every_service(session, launch):
-    processes = {name: launch(name, *(SMALL_FRAMES if name == "simulator" else ()))
-                 for name in SERVICES}
+def test_config_set_with_a_huge_string_is_answered_by_every_service(session, launch, tmp_path):
+    import cv2
+    import numpy as np
+
+    # The camera needs a source that stays: one photo, looped.
+    cv2.imwrite(str(tmp_path / "frame.png"), np.zeros((48, 64, 3), np.uint8))
+    overrides = {"simulator": SMALL_FRAMES, "camera": (f"source={tmp_path}", "loop=true", "rate_hz=5")}
+    processes = {name: launch(name, *overrides.get(name, ())) for name in SERVICES}
     for name in SERVICES:
         before = query_config(session, name)["config"]
         # A number field, or a boolean one for the ROS 2 bridge (it has no number): neither

@@ -1,0 +1,134 @@
+"""The camera service as a real process over a real router: photos, a video, a calibration
+file, and the ways a source ends."""
+
+import cv2
+import numpy as np
+import pytest
+
+from balltrack.common.images import image_to_bgr
+from balltrack.services.camera.calibration import CameraModel, write_calibration
+from tests.harness import Collector, query_config, start_service
+
+WIDTH, HEIGHT = 320, 240
+CALIBRATION = CameraModel(WIDTH, HEIGHT, 300.0, 301.0, 158.0, 121.0, (-0.2, 0.05, 0.001, 0.0, 0.0), "bench")
+
+
+def numbered_frame(index: int) -> np.ndarray:
+    """A frame whose mean grey level tells its index, and a gradient so it is not flat."""
+    image = np.full((HEIGHT, WIDTH, 3), 40 + 40 * index, np.uint8)
+    image[:, :, 1] = np.linspace(0, 255, WIDTH, dtype=np.uint8)[None, :]
+    return image
+
+
+def index_of(image: np.ndarray) -> int:
+    return int(round((float(image[:, :, 0].mean()) - 40) / 40))
+
+
+@pytest.fixture
+def photos(tmp_path):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for index in range(3):
+        cv2.imwrite(str(folder / f"frame{index:02d}.png"), numbered_frame(index))
+    (folder / "notes.txt").write_text("not an image, not read")
+    return folder
+
+
+def write_video(path, frames: int) -> None:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (WIDTH, HEIGHT))
+    for index in range(frames):
+        writer.write(numbered_frame(index % 5))
+    writer.release()
+
+
+def test_photos_with_a_calibration_loop_in_order(session, launch, photos, tmp_path):
+    calibration = tmp_path / "camera.yaml"
+    write_calibration(calibration, CALIBRATION)
+    images = Collector(session, "camera/image_raw", "Image")
+    infos = Collector(session, "camera/camera_info", "CameraInfo")
+    launch("camera", f"source={photos}", "rate_hz=20", "loop=true", "encoding=bgr8",
+           f"calibration={calibration}")
+    received = images.wait_count(8, 30)
+    assert all((m["width"], m["height"], m["encoding"]) == (WIDTH, HEIGHT, "bgr8") for m in received)
+    first = next(i for i, m in enumerate(received) if index_of(image_to_bgr(m)) == 0)
+    # Lossless: the published frame is the photo; in name order, and again after the last.
+    assert np.array_equal(image_to_bgr(received[first]), numbered_frame(0))
+    order = [index_of(image_to_bgr(m)) for m in received[first:first + 6]]
+    assert order == [0, 1, 2, 0, 1, 2], order
+    seqs = [m["header"]["seq"] for m in received]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+
+    info = infos.wait_count(1, 10)[0]
+    assert (info["width"], info["height"], info["fx"], info["fy"], info["cx"], info["cy"]) == \
+        (WIDTH, HEIGHT, 300.0, 301.0, 158.0, 121.0)
+    assert info["distortion_model"] == "plumb_bob" and info["d"] == list(CALIBRATION.distortion)
+    # Answered as a query too, as the simulator does (a locator started late asks).
+    replies = [reply for reply in session.get("camera/camera_info", timeout=5.0) if reply.ok is not None]
+    assert len(replies) == 1
+
+    # Live: the encoding changes; source changes are kept until a restart.
+    assert query_config(session, "camera", {"encoding": "jpeg"})["ok"]
+    images.wait_for(lambda m: m[-1]["encoding"] == "jpeg", 10, "a jpeg frame")
+    stats = Collector(session, "camera/stats", "Stats").wait_count(1, 5)[0]
+    assert stats["rewinds"] >= 2 and stats["frames"] >= 8 and stats["unreadable_files"] == 0
+
+
+def test_video_to_its_end_exits_0(session, router, tmp_path):
+    video = tmp_path / "clip.avi"
+    write_video(video, 12)
+    images = Collector(session, "camera/image_raw", "Image")
+    process = start_service("camera", router.endpoint, tmp_path, "--set", f"source={video}")
+    assert process.popen.wait(60) == 0, process.output()
+    received = images.wait_count(12, 10)
+    assert [m["header"]["seq"] for m in received] == list(range(12))
+    assert [index_of(image_to_bgr(m)) for m in received] == [index % 5 for index in range(12)]
+    assert all(m["encoding"] == "jpeg" for m in received)
+    assert "end of video" in process.output()
+
+
+def test_video_loops(session, launch, tmp_path):
+    video = tmp_path / "clip.avi"
+    write_video(video, 5)
+    images = Collector(session, "camera/image_raw", "Image")
+    launch("camera", f"source={video}", "loop=true", "rate_hz=30")
+    received = images.wait_count(12, 30)
+    order = [index_of(image_to_bgr(m)) for m in received]
+    first = order.index(0)
+    assert order[first:first + 7] == [0, 1, 2, 3, 4, 0, 1], order
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    (("source=/nonexistent/clip.mp4",), "camera: source: no such file, folder, device or URL: /nonexistent/clip.mp4"),
+    (("source=/dev/video99",), "camera: source: no such device /dev/video99"),
+    (("source=97",), "camera: source: cannot open device 97"),
+    (("source=BAD_VIDEO",), "camera: source: cannot open video "),
+    (("source=PHOTOS", "calibration=/nonexistent.yaml"), "camera: /nonexistent.yaml: cannot read"),
+    (("source=PHOTOS", "calibration=WRONG_SIZE"), "camera: calibration: calibration is for 640x360"),
+])
+def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_path, photos, overrides, expected):
+    bad_video = tmp_path / "broken.mp4"
+    bad_video.write_bytes(b"\x00" * 4096)
+    wrong_size = tmp_path / "wide.yaml"
+    write_calibration(wrong_size, CameraModel(640, 360, 500.0, 500.0, 320.0, 180.0))
+    replacements = {"BAD_VIDEO": str(bad_video), "PHOTOS": str(photos), "WRONG_SIZE": str(wrong_size)}
+    arguments = []
+    for override in overrides:
+        for placeholder, value in replacements.items():
+            override = override.replace(placeholder, value)
+        arguments += ["--set", override]
+    process = start_service("camera", router.endpoint, tmp_path, *arguments)
+    assert process.popen.wait(60) == 2, process.output()
+    errors = [line for line in process.output().splitlines() if line.startswith("camera: ")]
+    assert len(errors) == 1 and errors[0].startswith(expected), process.output()
+    assert "Traceback" not in process.output()
+
+
+def test_unreadable_photos_are_skipped_and_counted(session, launch, photos):
+    (photos / "frame01.png").write_bytes(b"not a png")
+    images = Collector(session, "camera/image_raw", "Image")
+    launch("camera", f"source={photos}/*.png", "rate_hz=20", "loop=true", "encoding=bgr8")
+    received = images.wait_count(6, 30)
+    assert set(index_of(image_to_bgr(m)) for m in received) == {0, 2}
+    stats = Collector(session, "camera/stats", "Stats").wait_for(
+        lambda m: m and m[-1]["unreadable_files"] >= 2, 10, "unreadable files counted")
+    assert stats

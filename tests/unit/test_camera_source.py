@@ -1,0 +1,137 @@
+"""The camera's source core: what ``source`` names, pacing, and a live source that goes away.
+
+A device cannot be unplugged here, so the reconnect test drives FrameFeed with a capture whose
+frames come from a script (it stands for cv2.VideoCapture of a device that vanishes and comes
+back); everything else runs on real files.
+"""
+
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from balltrack.services.camera.config import CameraConfig
+from balltrack.services.camera.source import Capture, FrameFeed, ImageFiles, Pacer, SourceError, SourceSpec, parse_source
+
+
+def test_source_kinds(tmp_path):
+    assert parse_source("0") == SourceSpec("device", 0)
+    assert parse_source(" 2 ") == SourceSpec("device", 2)
+    assert parse_source("rtsp://127.0.0.1:8554/cam").kind == "stream"
+    assert parse_source("http://127.0.0.1/video.mjpg").live
+    for name in ("b.png", "a.jpg", "c.txt"):
+        (tmp_path / name).write_bytes(b"x")
+    assert parse_source(str(tmp_path)).paths == (str(tmp_path / "a.jpg"), str(tmp_path / "b.png"))
+    assert parse_source(str(tmp_path / "*.png")).paths == (str(tmp_path / "b.png"),)
+    assert parse_source(str(tmp_path / "a.jpg")).kind == "images"
+    (tmp_path / "clip.mp4").write_bytes(b"x")
+    assert parse_source(str(tmp_path / "clip.mp4")) == SourceSpec("video", str(tmp_path / "clip.mp4"))
+    for bad, reason in ((str(tmp_path / "none.mp4"), "no such file"), (str(tmp_path / "*.gif"), "no file matches"),
+                        ("/dev/video77", "no such device")):
+        with pytest.raises(SourceError, match=reason):
+            parse_source(bad)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SourceError, match="no images"):
+        parse_source(str(tmp_path / "empty"))
+
+
+def test_pacer_books_due_times_without_bursts():
+    pacer = Pacer()
+    assert pacer.delay(10.0, 100.0) == 0.0
+    assert pacer.delay(10.0, 100.02) == pytest.approx(0.08)
+    assert pacer.delay(10.0, 100.5) == 0.0        # fell behind: no burst to catch up
+    assert pacer.delay(10.0, 100.5) == pytest.approx(0.1)
+    assert pacer.delay(None, 101.0) == 0.0
+    live = Pacer()
+    sent = [live.due(10.0, 0.0 + index / 30) for index in range(30)]  # a 30 Hz device at 10 Hz
+    assert sum(sent) == 10
+
+
+class ScriptedDevice:
+    """A capture that yields ``frames`` frames then fails, as a device that is unplugged."""
+
+    def __init__(self, opens: list):
+        self.opens = opens  # per open(): None = cannot open, else how many frames it gives
+
+    def __call__(self, target):
+        script = self.opens.pop(0) if self.opens else None
+        return _Capture(script)
+
+
+class _Capture:
+    def __init__(self, frames):
+        self.frames = frames
+
+    def isOpened(self):
+        return self.frames is not None
+
+    def read(self):
+        if not self.frames:
+            return False, None
+        self.frames -= 1
+        return True, np.zeros((4, 4, 3), np.uint8)
+
+    def set(self, *args):
+        return True
+
+    def get(self, prop):
+        return 30.0
+
+    def release(self):
+        pass
+
+
+def test_a_device_that_disappears_is_reopened_with_backoff_and_counted():
+    # Opened with 3 frames; lost; the first retry fails; the second brings 2 more frames; lost
+    # again, and the test stops it while it retries.
+    device = ScriptedDevice([3, None, 2])
+    stop = threading.Event()
+    capture = Capture(SourceSpec("device", 5), opener=device)
+    feed = FrameFeed(SourceSpec("device", 5), capture, lambda: CameraConfig(), stop)
+    frames = []
+    for image in feed:
+        frames.append(image)
+        if len(frames) == 5:
+            threading.Timer(0.2, stop.set).start()
+    assert len(frames) == 5
+    assert feed.disconnects == 2 and feed.reconnects == 1
+    assert not feed.ended  # stopped, not the end of a file
+    assert feed.stats()["reconnects"] == 1
+
+
+def test_a_device_that_cannot_be_opened_is_an_error():
+    with pytest.raises(SourceError, match="cannot open device 5"):
+        Capture(SourceSpec("device", 5), opener=ScriptedDevice([None]))
+    with pytest.raises(SourceError, match="cannot open device 5"):
+        Capture(SourceSpec("device", 5), opener=ScriptedDevice([0]))  # opens, but no frame
+
+
+def test_video_file_rate_loop_and_end(tmp_path):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48))
+    for index in range(4):
+        writer.write(np.full((48, 64, 3), 50 * index, np.uint8))
+    writer.release()
+    spec = parse_source(str(path))
+    settings = {"config": CameraConfig(source=str(path), rate_hz=1000.0)}
+    feed = FrameFeed(spec, Capture(spec), lambda: settings["config"], threading.Event())
+    assert feed.rate() == 1000.0
+    settings["config"] = CameraConfig(source=str(path), rate_hz=0.0)
+    assert feed.rate() == pytest.approx(25.0)  # the file's own
+    settings["config"] = CameraConfig(source=str(path), rate_hz=1000.0, loop=True)
+    levels = []
+    for image in feed:
+        levels.append(int(round(image.mean() / 50)))
+        if len(levels) == 6:
+            settings["config"] = CameraConfig(source=str(path), rate_hz=1000.0, loop=False)
+    assert levels == [0, 1, 2, 3, 0, 1, 2, 3]
+    assert feed.ended and feed.rewinds == 1
+
+
+def test_photos_without_one_readable_file_end_even_with_loop(tmp_path):
+    (tmp_path / "a.png").write_bytes(b"broken")
+    spec = parse_source(str(tmp_path))
+    feed = FrameFeed(spec, ImageFiles(spec.paths), lambda: CameraConfig(source="x", loop=True), threading.Event())
+    assert list(feed) == [] and feed.ended
+    assert feed.stats()["unreadable_files"] == 1
