@@ -28,6 +28,7 @@ CONFIGS = (
     ("locator", "balltrack.services.locator.config", "LocatorConfig"),
     ("follower", "balltrack.services.follower.config", "FollowerConfig"),
     ("simulator", "balltrack.services.simulator.config", "SimulatorConfig"),
+    ("camera", "balltrack.services.camera.config", "CameraConfig"),
 )
 
 INTRODUCTIONS = {
@@ -37,6 +38,8 @@ INTRODUCTIONS = {
     "follower": "Turns `detected_ball` into `cmd_vel` (paper section 2.4). The first six are the ROS2 "
                 "`follow_ball` node's parameters, with its defaults.",
     "simulator": "The MuJoCo world that stands in for the paper's Gazebo: camera, robot base, referee.",
+    "camera": "Frames from a real camera, a video, photos or a stream, published as the simulator's are "
+              "(see [Your own camera](#your-own-camera)).",
 }
 
 
