@@ -4,14 +4,14 @@
 A :class:`Recording` subscribes to keys on an open session and writes what arrives; Zenoh's
 callbacks only take the arrival time and queue the payload, a thread of its own compresses and
 writes, so a recording never slows the subscriber it shares a session with (the demo's). When
-the writer falls behind by more than ``max_queued`` messages the newest are dropped and counted
-rather than memory growing without bound.
+the writer falls behind by more than ``max_queued_bytes`` of payloads, what arrives is dropped
+and counted rather than memory growing without bound.
 
 :func:`play` publishes a recording's payloads, byte for byte, with the recorded timing (log-time
 differences divided by ``rate``) or as fast as possible (``rate`` 0).
 """
 
-import queue
+import collections
 import threading
 import time
 from dataclasses import dataclass, field
@@ -31,7 +31,7 @@ DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
 class RecordingCounts:
     received: int = 0
     written: int = 0
-    dropped: int = 0  # the writer was more than max_queued messages behind
+    dropped: int = 0  # the writer was more than max_queued_bytes behind
     per_topic: dict[str, int] = field(default_factory=dict)
 
 
@@ -40,13 +40,15 @@ class Recording:
     ``namespace`` from ``session`` into ``path`` until :meth:`close`."""
 
     def __init__(self, session, path, keys: Iterable[str] = DEFAULT_KEYS, namespace: str = "",
-                 max_queued: int = 1000, metadata: dict[str, str] | None = None):
+                 max_queued_bytes: int = 256 << 20, metadata: dict[str, str] | None = None):
         self.keys = Keys(namespace)
         self.recorder = Recorder(path, metadata={"namespace": self.keys.namespace,
                                                  **(metadata or {})})
         self.counts = RecordingCounts()
-        self._queue: queue.Queue = queue.Queue(maxsize=max_queued)
-        self._lock = threading.Lock()
+        # (topic, payload, arrival ns); None asks the writer to finish
+        self._pending: collections.deque = collections.deque()
+        self._pending_bytes, self._max_queued_bytes = 0, max_queued_bytes
+        self._changed = threading.Condition()
         self._writer = threading.Thread(target=self._write_queued, name="recording-writer",
                                         daemon=True)
         self._writer.start()
@@ -60,25 +62,30 @@ class Recording:
 
     def _on_sample(self, sample) -> None:
         arrival = time.time_ns()
-        try:
-            self._queue.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), arrival))
-            counted = "received"
-        except queue.Full:
-            counted = "dropped"
-        with self._lock:
-            setattr(self.counts, counted, getattr(self.counts, counted) + 1)
+        payload = sample.payload.to_bytes()
+        with self._changed:
+            if self._pending_bytes + len(payload) > self._max_queued_bytes:
+                self.counts.dropped += 1
+                return
+            self.counts.received += 1
+            self._pending.append((str(sample.key_expr), payload, arrival))
+            self._pending_bytes += len(payload)
+            self._changed.notify()
 
     def _write_queued(self) -> None:
         while True:
-            item = self._queue.get()
-            if item is None:
-                return
+            with self._changed:
+                self._changed.wait_for(lambda: self._pending)
+                item = self._pending.popleft()
+                if item is None:
+                    return
+                self._pending_bytes -= len(item[1])
             topic, payload, arrival = item
             key = self.keys.strip(topic)
             channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace,
                                                     self.keys.message_of(topic))
             self.recorder.write_payload(channel, payload, arrival)
-            with self._lock:
+            with self._changed:
                 self.counts.written += 1
                 self.counts.per_topic[topic] = self.counts.per_topic.get(topic, 0) + 1
 
@@ -91,7 +98,9 @@ class Recording:
                 pass
         self._subscribers = []
         if self._writer.is_alive():
-            self._queue.put(None)  # blocks only while the writer drains a full queue
+            with self._changed:
+                self._pending.append(None)  # after what is queued: all of it gets written
+                self._changed.notify()
             self._writer.join()
         self.recorder.close()
         return self.counts
@@ -172,3 +181,29 @@ def play(session, recording: RecordingFile, stop: threading.Event, rate: float =
         for publisher in publishers.values():
             publisher.undeclare()
     return counts
+
+
+def wait_routed(session, echo_session, timeout: float) -> bool:
+    """True once everything ``session`` put before this call has reached the router.
+
+    A marker put by ``session`` (BLOCK, the data priority: it queues behind the data) is waited
+    for at ``echo_session``, a second session on the same router; the router forwards in order,
+    so once the marker is back the router holds all that came before it. Zenoh has no flush,
+    and a closed session drops what it had not yet sent.
+    """
+    # A verbatim chunk (@...): no wildcard matches it, so `record '**'` never sees the marker.
+    key = f"@balltrack/play/{session.zid()}/routed"
+    arrived = threading.Event()
+    subscriber = echo_session.declare_subscriber(key, lambda _sample: arrived.set())
+    publisher = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+    try:
+        deadline = time.monotonic() + timeout
+        while not publisher.matching_status.matching:  # the router has told us of the echo
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)  # polling a status, bounded by the deadline
+        publisher.put(b"")
+        return arrived.wait(max(0.0, deadline - time.monotonic()))
+    finally:
+        publisher.undeclare()
+        subscriber.undeclare()

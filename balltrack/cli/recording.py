@@ -19,7 +19,7 @@ from balltrack.cli.output import Output, silence_closed_stdout
 from balltrack.cli.session import networked, open_or_report
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics
+from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics, wait_routed
 
 
 def _fail(args, reason: str, status: int) -> int:
@@ -124,6 +124,8 @@ def command_play(args) -> int:
         except RecordingError as error:
             return _fail(args, str(error), 1)
         finally:
+            if not stop.is_set():  # the end of the file: let the router take what is queued
+                _wait_routed(args, session)
             session.close()
     elapsed = time.monotonic() - started
     out.line(f"published {counts.published} messages in {elapsed:.1f} s "
@@ -133,6 +135,19 @@ def command_play(args) -> int:
     if out.closed:
         silence_closed_stdout()
     return 0
+
+
+def _wait_routed(args, session) -> None:
+    """Closing a session drops what it has not sent yet (the last frames of a recording): wait
+    until a marker put after them came back through the router to a second session."""
+    echo = open_or_report(args)
+    if echo is not None:
+        try:
+            if not wait_routed(session, echo, args.timeout):
+                print(f"balltrack play: the router did not confirm the last messages in "
+                      f"{args.timeout:g} s; some may be lost", file=sys.stderr)
+        finally:
+            echo.close()
 
 
 def command_info(args) -> int:

@@ -32,10 +32,10 @@ def ball3d(seq: int) -> bytes:
                              "y": 0.0, "z": 1.5, "distance": 1.5})
 
 
-def image(seq: int) -> bytes:
-    pixels = bytes((seq + index) % 256 for index in range(256)) * (640 * 480 * 3 // 256)
-    return encode("Image", {"header": header(5_000_000 * seq, seq), "width": 640,
-                            "height": 480, "encoding": "rgb8", "data": pixels})
+def image(seq: int, width: int = 640, height: int = 480) -> bytes:
+    pixels = bytes((seq + index) % 256 for index in range(256)) * (width * height * 3 // 256)
+    return encode("Image", {"header": header(5_000_000 * seq, seq), "width": width,
+                            "height": height, "encoding": "rgb8", "data": pixels})
 
 
 def wait_matched(publisher, timeout: float = 20) -> None:
@@ -119,13 +119,16 @@ def test_record_writes_what_was_published_and_info_counts_it(router, session, tm
 
 
 def known_recording(path, count: int = 12, namespace: str = "") -> list[tuple[str, bytes]]:
-    """A file of ``count`` Ball3D and every third an Image, log times 1 s apart."""
+    """A file of ``count`` Ball3D and every third an Image, log times 1 s apart. The images are
+    160x120 (57 kB, one Zenoh batch): under load a router may drop a message of many fragments
+    on its way to a slow subscriber (eclipse-zenoh/zenoh#1494, #2258), which is not what these
+    tests are about; full frames are replayed in tests/e2e/test_recording_replay.py."""
     prefix = f"{namespace}/" if namespace else ""
     recorder = Recorder(path)
     written = []
     for seq in range(count):
         for key, message_type, payload in (("detected_ball_3d", "Ball3D", ball3d(seq)),
-                                           ("camera/image_raw", "Image", image(seq))):
+                                           ("camera/image_raw", "Image", image(seq, 160, 120))):
             if key == "camera/image_raw" and seq % 3:
                 continue
             channel = recorder.msgpack_channel(prefix + key, key, namespace, message_type)
