@@ -55,7 +55,8 @@ class Recording:
         self._subscribers = []
         try:
             for key in dict.fromkeys(keys):
-                self._subscribers.append(session.declare_subscriber(self.keys(key), self._on_sample))
+                self._subscribers.append(session.declare_subscriber(self.keys(key),
+                                                                    self._on_sample))
         except Exception:
             self.close()
             raise

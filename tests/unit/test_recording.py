@@ -28,7 +28,8 @@ def test_header_fields_are_read_leniently():
 def test_written_messages_read_back_with_times_schema_and_counts(tmp_path):
     path = tmp_path / "r.mcap"
     recorder = Recorder(path)
-    balls = recorder.msgpack_channel("robot1/detected_ball_3d", "detected_ball_3d", "robot1", "Ball3D")
+    balls = recorder.msgpack_channel("robot1/detected_ball_3d", "detected_ball_3d", "robot1",
+                                     "Ball3D")
     assert recorder.msgpack_channel("robot1/detected_ball_3d", "detected_ball_3d", "robot1",
                                     "Ball3D") == balls
     other = recorder.msgpack_channel("robot1/custom", "custom", "robot1", None)
@@ -73,7 +74,8 @@ def test_topics_and_start_select_messages(tmp_path):
     first = recorder.msgpack_channel("a", "a", "", "Ball3D")
     second = recorder.msgpack_channel("b", "b", "", "Ball3D")
     for seq in range(10):
-        recorder.write_payload(first if seq % 2 else second, ball3d(seq, seq), arrival_ns=seq * 10**9)
+        recorder.write_payload(first if seq % 2 else second, ball3d(seq, seq),
+                               arrival_ns=seq * 10**9)
     recorder.close()
     with RecordingFile(path) as recording:
         assert [m.sequence for m in recording.messages(["a"])] == [1, 3, 5, 7, 9]
