@@ -306,7 +306,7 @@ def build_parser(name: str, description: str | None, config_class=None) -> argpa
     parser = ArgumentParser(prog=f"balltrack run {name}", description=description,
                             epilog=help_text(config_class) if config_class else None,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_session_arguments(parser)
+    add_session_arguments(parser, role=name)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
 

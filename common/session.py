@@ -10,11 +10,22 @@ a restarted router is rejoined in a fraction of a second.
 import argparse
 import json
 import os
+from pathlib import Path
 
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
 # How long a client waits for its router at start before giving up (seconds); -1 = forever.
 DEFAULT_OPEN_TIMEOUT = float(os.environ.get("BALLTRACK_OPEN_TIMEOUT", "30"))
+# A secure profile (`balltrack secure init DIR`, deploy/secure.py): DIR/<role>/client.json5 per
+# role, DIR/<host>/router.json5 per router; the settings naming files next to them.
+SECURE_CLIENT_CONFIG = "client.json5"
+ROUTER_CONFIG = "router.json5"
+ROUTER_USER = "router"
+SECURE_FILE_SETTINGS = tuple(f"transport/link/tls/{name}" for name in (
+    "root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
+    "connect_certificate")) + ("transport/auth/usrpwd/dictionary_file",)
+# Who the `balltrack` commands (status, echo, config, sim...) are in a secure profile.
+DEFAULT_COMMAND_ROLE = "operator"
 
 
 def default_endpoints() -> list[str]:
@@ -29,8 +40,10 @@ class ArgumentParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message}\n")
 
 
-def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = True) -> None:
-    """The options every service and command shares: --connect, --namespace, --config, --set."""
+def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = True,
+                          role: str | None = None) -> None:
+    """The options every service and command shares: --connect, --namespace, --config, --set,
+    --secure (a service's ``role`` is its name; a command takes ``--role``)."""
     parser.add_argument("--connect", action="append", metavar="ENDPOINT", default=None,
                         help=f"router endpoint, repeatable (default: {DEFAULT_ENDPOINT} "
                              "or $BALLTRACK_CONNECT)")
@@ -38,6 +51,13 @@ def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = T
                         metavar="NS", help="key prefix, e.g. robot1 (default: none)")
     parser.add_argument("--zenoh-config", default=None, metavar="FILE",
                         help="a Zenoh json5 config file for the session (optional)")
+    parser.add_argument("--secure", default=None, metavar="DIR",
+                        help="a secure profile (balltrack secure init): use DIR/<role>/client.json5")
+    if role is None:
+        parser.add_argument("--role", default=DEFAULT_COMMAND_ROLE, metavar="ROLE",
+                            help=f"the role with --secure (default {DEFAULT_COMMAND_ROLE}; viewer only reads)")
+    else:
+        parser.set_defaults(role=role)
     if config_file:
         parser.add_argument("--config", default=None, metavar="FILE", help="TOML parameter file")
         parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -54,11 +74,48 @@ def _common_settings(config) -> None:
                                       "period_increase_factor": 1.5})
 
 
+def load_config_file(path: str | Path):
+    """A Zenoh json5 file whose relative file names (certificates, keys, users) are taken
+    relative to the file's own folder, so a profile folder works from anywhere."""
+    import zenoh
+
+    config = zenoh.Config.from_file(str(path))
+    for setting in SECURE_FILE_SETTINGS:
+        value = json.loads(config.get_json(setting))
+        if isinstance(value, str) and value and not os.path.isabs(value):
+            _insert(config, setting, str(Path(path).resolve().parent / value))
+    return config
+
+
+def secure_client_path(directory: str | Path, role: str) -> Path:
+    """A role's client config in a secure profile; ValueError with one line if absent."""
+    path = Path(directory) / role / SECURE_CLIENT_CONFIG
+    if not path.is_file():
+        raise ValueError(f"--secure: no {path} (not a profile from `balltrack secure init`, or "
+                         f"role {role}'s folder was not copied here)")
+    return path
+
+
+def secure_router_path(directory: str | Path, host: str | None = None) -> Path:
+    """A host's router config in a secure profile: ``host``'s, else the only one in the folder."""
+    directory = Path(directory)
+    if host is None:
+        hosts = sorted(path.parent.name for path in directory.glob(f"*/{ROUTER_CONFIG}"))
+        if len(hosts) != 1:
+            raise ValueError(f"--secure: {directory} holds routers for {', '.join(hosts) or 'no host'}; "
+                             "name one with --host")
+        host = hosts[0]
+    path = directory / host / ROUTER_CONFIG
+    if not path.is_file():
+        raise ValueError(f"--secure: no {path} (host {host} is not in this profile)")
+    return path
+
+
 def client_config(endpoints: list[str] | None = None, zenoh_config_file: str | None = None,
                   open_timeout: float | None = None):
     import zenoh
 
-    config = zenoh.Config.from_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
+    config = load_config_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
     if not zenoh_config_file:
         _insert(config, "mode", "client")
         _common_settings(config)
@@ -74,7 +131,7 @@ def router_config(listen: list[str], connect: list[str] | None = None,
     """A router listening on ``listen``; ``connect`` joins other routers (a cluster)."""
     import zenoh
 
-    config = zenoh.Config.from_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
+    config = load_config_file(zenoh_config_file) if zenoh_config_file else zenoh.Config()
     _insert(config, "mode", "router")
     if not zenoh_config_file:
         _common_settings(config)
@@ -114,4 +171,10 @@ def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | No
 
 
 def open_from_args(args, open_timeout: float | None = None):
-    return open_session(args.connect, getattr(args, "zenoh_config", None), open_timeout)
+    zenoh_config = getattr(args, "zenoh_config", None)
+    if getattr(args, "secure", None):
+        try:
+            zenoh_config = str(secure_client_path(args.secure, args.role))
+        except ValueError as error:
+            raise SessionOpenError(str(error)) from None
+    return open_session(args.connect, zenoh_config, open_timeout)

@@ -4,6 +4,7 @@
     python -m deploy start --router --listen tcp/0.0.0.0:7447 --services detector,locator,follower
     python -m deploy start --connect tcp/192.168.1.10:7447 --services detector --namespace robot1
     python -m deploy start --router --config-dir deploy/config/demo --set follower.max_size_thresh=0.3
+    python -m deploy start --router --secure secure/                 # TLS, passwords, access control
     python -m deploy status [--json]
     python -m deploy stop
 
@@ -24,7 +25,8 @@ import time
 from pathlib import Path
 
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys
-from balltrack.common.session import DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints
+from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints,
+                                      load_config_file, secure_client_path, secure_router_path)
 from balltrack.common.status import service_status
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
                                          die_with_parent, open_for, pid_alive, save_launch, supervise,
@@ -78,28 +80,52 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
     unknown = [name for name in services if name not in SERVICES]
     if unknown:
         raise LaunchError(f"--services: unknown {', '.join(unknown)} (known: {', '.join(SERVICES)})")
-    if not args.router and (args.listen or args.router_connect or args.router_config):
-        raise LaunchError("--listen, --router-connect and --router-config need --router")
+    if not args.router and (args.listen or args.router_connect or args.router_config or args.host):
+        raise LaunchError("--listen, --router-connect, --router-config and --host need --router")
+    if args.secure and (args.router_config or args.zenoh_config):
+        raise LaunchError("--secure names the Zenoh configs itself: no --router-config or --zenoh-config with it")
+    listen = args.listen or (secure_listen(args.secure, args.host) if args.secure and args.router else [DEFAULT_LISTEN])
     return make_specs(services, parse_service_overrides(args.overrides, services), router=args.router,
-                      listen=args.listen or [DEFAULT_LISTEN], router_connect=args.router_connect,
+                      listen=listen, router_connect=args.router_connect,
                       router_config=args.router_config, connect=args.connect,
                       zenoh_config=args.zenoh_config, namespace=args.namespace,
-                      config_dir=args.config_dir, log_level=args.log_level)
+                      config_dir=args.config_dir, log_level=args.log_level, secure=args.secure, host=args.host)
+
+
+def secure_listen(directory: str, host: str | None) -> list[str]:
+    """The endpoints in a secure profile's router config (``tls/0.0.0.0:7447``)."""
+    try:
+        config = load_config_file(secure_router_path(directory, host))
+    except ValueError as error:
+        raise LaunchError(str(error)) from None
+    return json.loads(config.get_json("listen/endpoints"))
 
 
 def make_specs(services: list[str], overrides: dict[str, list[str]], router: bool = False,
                listen: list[str] = (DEFAULT_LISTEN,), router_connect: list[str] = (),
                router_config: str | None = None, connect: list[str] | None = None,
                zenoh_config: str | None = None, namespace: str = "", config_dir: str | None = None,
-               log_level: str = "INFO") -> tuple[list[ChildSpec], dict]:
+               log_level: str = "INFO", secure: str | None = None,
+               host: str | None = None) -> tuple[list[ChildSpec], dict]:
     """The children (router first, then ``services`` in order) and the facts ``status`` needs.
 
     ``overrides`` maps a service to its ``key=value`` settings. With our own router each
     service must be alive before the next starts, so the last (the simulator) meets a ready
-    pipeline; services of a remote router start at once (it may not be up yet)."""
+    pipeline; services of a remote router start at once (it may not be up yet). ``secure``:
+    a profile folder (``balltrack secure init``); the router is ``host``'s, each service its
+    own role, and this program watches them as ``viewer``."""
     python = sys.executable
     Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
+    if secure:
+        try:
+            if router:
+                secure_router_path(secure, host)
+            for role in [*services, "viewer"]:
+                secure_client_path(secure, role)
+        except ValueError as error:
+            raise LaunchError(str(error)) from None
+        zenoh_config = str(secure_client_path(absolute(secure), "viewer"))  # for wait_alive and status
     specs: list[ChildSpec] = []
     if router:
         argv = [python, "-m", "balltrack", "router"]
@@ -109,7 +135,10 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             argv += ["--connect", endpoint]
         if router_config:
             argv += ["--zenoh-config", absolute(router_config)]
-        port = endpoint_port(listen[0]) if listen[0].startswith("tcp/") else None
+        if secure:
+            argv += ["--secure", absolute(secure)] + (["--host", host] if host else [])
+        # A TLS listener accepts TCP connections too: the supervisor's readiness check works.
+        port = endpoint_port(listen[0]) if listen[0].startswith(("tcp/", "tls/")) else None
         if port == 0:
             raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
         specs.append(ChildSpec("router", argv, port=port))
@@ -131,7 +160,9 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             argv += ["--connect", endpoint]
         if namespace:
             argv += ["--namespace", namespace]
-        if zenoh_config:
+        if secure:
+            argv += ["--secure", absolute(secure)]
+        elif zenoh_config:
             argv += ["--zenoh-config", absolute(zenoh_config)]
         if config_path is not None and (config_path / f"{name}.toml").is_file():
             argv += ["--config", str(config_path / f"{name}.toml")]
@@ -140,7 +171,7 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
         argv += ["--log-level", log_level]
         specs.append(ChildSpec(name, argv, wait_alive=router and name != services[-1]))
     info = {"connect": connect, "namespace": namespace, "services": list(services),
-            "zenoh_config": absolute(zenoh_config), "router": bool(router)}
+            "zenoh_config": absolute(zenoh_config), "router": bool(router), "secure": absolute(secure)}
     return specs, info
 
 
@@ -384,6 +415,10 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
                        help="key prefix for every service, e.g. robot1")
     start.add_argument("--zenoh-config", metavar="FILE",
                        help="a Zenoh json5 config for the services (e.g. deploy/zenoh/client.json5)")
+    start.add_argument("--secure", metavar="DIR",
+                       help="a secure profile (balltrack secure init): TLS, passwords, access control")
+    start.add_argument("--host", metavar="NAME",
+                       help="with --secure --router: this host's router in the profile (default: the only one)")
     start.add_argument("--config-dir", metavar="DIR",
                        help="parameter files DIR/<service>.toml (e.g. deploy/config/demo)")
     start.add_argument("--set", action="append", default=[], dest="overrides",

@@ -8,7 +8,7 @@ from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SIM_OPS, decode, encode
-from balltrack.common.session import DEFAULT_PORT, first_error_line, router_config
+from balltrack.common.session import DEFAULT_PORT, first_error_line, router_config, secure_router_path
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.common.status import service_status
 
@@ -16,12 +16,22 @@ from balltrack.common.status import service_status
 def command_router(args) -> int:
     import zenoh
 
-    listen = args.listen or [f"tcp/0.0.0.0:{DEFAULT_PORT}"]
+    zenoh_config = args.zenoh_config
+    if args.secure:
+        try:
+            zenoh_config = str(secure_router_path(args.secure, args.host))
+        except ValueError as error:
+            print(f"balltrack router: {error}", file=sys.stderr)
+            return 2
+    # A config file's own endpoints stand unless --listen replaces them.
+    listen = args.listen or ([] if zenoh_config else [f"tcp/0.0.0.0:{DEFAULT_PORT}"])
     try:
-        session = zenoh.open(router_config(listen, args.connect, args.zenoh_config))
+        config = router_config(listen, args.connect, zenoh_config)
+        listen = listen or json.loads(config.get_json("listen/endpoints"))
+        session = zenoh.open(config)
     except Exception as error:
-        print(f"balltrack router: cannot listen on {', '.join(listen)}: {first_error_line(error)}",
-              file=sys.stderr)
+        print(f"balltrack router: cannot listen on {', '.join(map(str, listen)) or 'its endpoints'}: "
+              f"{first_error_line(error)}", file=sys.stderr)
         return 1
     print(f"router {session.zid()} listening on {', '.join(listen)}", flush=True)
     stop = stop_on_signals()
@@ -90,6 +100,10 @@ def register(commands) -> None:
     router.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help="another router to join (a cluster), repeatable")
     router.add_argument("--zenoh-config", metavar="FILE", help="a Zenoh json5 config file")
+    router.add_argument("--secure", metavar="DIR", help="a secure profile: DIR/HOST/router.json5 "
+                        "(balltrack secure init)")
+    router.add_argument("--host", metavar="NAME", help="with --secure: this host's name in the profile "
+                        "(default: the only host in DIR)")
     router.set_defaults(handler=command_router)
 
     networked(commands, "status", "which services are alive, with their stats", command_status)

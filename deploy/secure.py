@@ -1,0 +1,438 @@
+"""A secure deployment profile: TLS with mutual authentication, passwords and access control.
+
+    balltrack secure init secure/ --hosts robot,server
+
+Without it, any process that reaches a router's port joins without credentials, reads every
+camera frame and may publish ``cmd_vel``. The profile uses Zenoh's own mechanisms only:
+
+* **TLS, both ways** (``transport/link/tls``, ``enable_mtls`` on routers and clients): a CA made
+  here signs one certificate per router host and one per role; a client refuses a router whose
+  certificate does not name the address it dials, a router refuses a client without a
+  certificate from this CA.
+* **User and password** (``transport/auth/usrpwd``): one password per role, the router's
+  ``dictionary_file`` (``users.txt``, ``user:password`` per line).
+* **Access control** (``access_control``, default ``deny``) on every router: a role is a subject
+  (its certificate's common name AND its user name) allowed only its own keys: what it puts,
+  subscribes to, answers and asks, and its own liveliness token ``alive/<role>``.
+
+Every process is a Zenoh client of a router: peers would mesh directly, around the routers'
+access control. What each role may do is :data:`ROLES` plus the key table
+(``common/keys.py``: who publishes what), checked against the running services by
+``tests/integration/test_secure.py``.
+
+The folder written by :func:`init_profile`::
+
+    DIR/ca/ca.pem, ca.key        the authority (keep ca.key on this machine only)
+    DIR/<host>/router.json5      a router's config, with router.pem, router.key, ca.pem, users.txt
+    DIR/<role>/client.json5      a role's config, with <role>.pem, <role>.key, ca.pem, password
+
+The json5 files name their other files relative to their own folder (``ca.pem``): balltrack
+(``--secure DIR``) resolves them there, so a folder can be copied anywhere; ``zenohd -c`` and
+other Zenoh programs resolve them against the current directory (start them in that folder).
+Private keys, passwords, the users file and the json5 files holding a password are mode 0600.
+"""
+
+import datetime
+import ipaddress
+import json
+import os
+import re
+import secrets
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from balltrack.common import keys as key_table
+from balltrack.common.keys import SERVICES, Keys
+from balltrack.common.session import (ROUTER_CONFIG, ROUTER_USER, SECURE_CLIENT_CONFIG, SECURE_FILE_SETTINGS,
+                                      secure_client_path)
+
+DEFAULT_PORT = 7447
+# A leaf certificate lives about two years (CA/Browser Forum's old 825-day limit); re-run
+# `secure init --force` to renew. The authority lives ten.
+LEAF_DAYS = 825
+CA_DAYS = 3650
+# Every message kind Zenoh 1.x access control knows.
+ALL_MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query")
+# Not roles, not hosts: folder names the profile uses for itself.
+RESERVED_NAMES = {"ca"}
+
+
+class ProfileError(ValueError):
+    """A one-line reason init cannot go on (exit 2)."""
+
+
+@dataclass(frozen=True)
+class Role:
+    """What one role does on the network beyond the key table's ``publisher`` column.
+
+    ``puts`` are keys it publishes that the table credits to someone else (the operator's
+    ``cmd_vel``), ``subscribes``/``queries``/``answers`` are the keys of its subscribers, its
+    ``get``s and its queryables, ``watches`` whether it follows the ``alive/*`` tokens."""
+    subscribes: tuple[str, ...] = ()
+    puts: tuple[str, ...] = ()
+    queries: tuple[str, ...] = ()
+    answers: tuple[str, ...] = ()
+    watches: bool = False
+    service: bool = True  # a balltrack service: its own stats, config queryable, alive token
+
+
+# The ROS side of the bridge: zenoh-bridge-ros2dds's keys under the bridge's `prefix` (ros/ by
+# default; a profile for another prefix needs --ros-prefix).
+ROS_PREFIX = "ros/"
+# Every service's config queryable, and the admin space `balltrack topic` reads (read-only).
+ANY_CONFIG = "*/config"
+ADMIN_SPACE = "@/**"
+
+# From each service's docstring (services/*/service.py): what it subscribes to and asks.
+ROLES: dict[str, Role] = {
+    "detector": Role(subscribes=(key_table.IMAGE_RAW,)),
+    "locator": Role(subscribes=(key_table.DETECTED_BALL, key_table.CAMERA_INFO),
+                    queries=(key_table.CAMERA_INFO,)),
+    # clock only with use_sim_time, the demo's setting.
+    "follower": Role(subscribes=(key_table.DETECTED_BALLS, key_table.DETECTED_BALL, key_table.CLOCK)),
+    "simulator": Role(subscribes=(key_table.CMD_VEL, key_table.DETECTED_BALLS),
+                      answers=(key_table.CAMERA_INFO,), watches=True),
+    "camera": Role(answers=(key_table.CAMERA_INFO,)),
+    "ros2_bridge": Role(subscribes=(key_table.DETECTED_BALL, key_table.DETECTED_BALL_3D, key_table.CMD_VEL,
+                                    f"{ROS_PREFIX}**"),
+                        puts=(key_table.IMAGE_RAW, key_table.CAMERA_INFO, f"{ROS_PREFIX}**")),
+    # Watches everything, changes nothing: no put, no query (a config query may set parameters).
+    "viewer": Role(subscribes=("**",), queries=(ADMIN_SPACE,), watches=True, service=False),
+    # A person or the demo: watches, drives (teleop), asks services and the simulator.
+    "operator": Role(subscribes=("**",), puts=(key_table.CMD_VEL,),
+                     queries=(ADMIN_SPACE, ANY_CONFIG, key_table.SIM_CONTROL, key_table.CAMERA_INFO),
+                     watches=True, service=False),
+}
+
+
+def table_publishers(spec: key_table.KeySpec) -> set[str]:
+    """The services the key table names as ``spec``'s publisher ("simulator or camera")."""
+    if spec.publisher == "every service":
+        return set(SERVICES)
+    return {word for word in re.split(r"\W+", spec.publisher) if word in SERVICES}
+
+
+@dataclass(frozen=True)
+class Permissions:
+    """One role's keys per kind of operation, without namespace."""
+    puts: tuple[str, ...]
+    subscribes: tuple[str, ...]
+    answers: tuple[str, ...]
+    queries: tuple[str, ...]
+    tokens: tuple[str, ...]
+    watches: tuple[str, ...]
+
+
+def permissions(role: str) -> Permissions:
+    """The key table's rows for ``role`` plus its :data:`ROLES` entry."""
+    entry = ROLES[role]
+    puts, answers = [], list(entry.answers)
+    for spec in key_table.TABLE:
+        if role not in table_publishers(spec) or spec.key.startswith("alive/"):
+            continue
+        key = spec.key.replace("<service>", role)
+        (answers if "->" in spec.message else puts).append(key)
+    puts += entry.puts
+    tokens = [key_table.alive_key(role)] if entry.service else []
+    watches = ["alive/*"] if entry.watches else []
+    unique = lambda items: tuple(dict.fromkeys(items))  # noqa: E731 - order kept, repeats dropped
+    return Permissions(unique(puts), unique(entry.subscribes), unique(answers), unique(entry.queries),
+                       tuple(tokens), tuple(watches))
+
+
+def _rule(identifier: str, messages: list[str], flows: list[str], key_exprs: list[str]) -> dict:
+    return {"id": identifier, "permission": "allow", "flows": flows, "messages": messages,
+            "key_exprs": key_exprs}
+
+
+def access_control(namespace: str = "", router_names: list[str] = ()) -> dict:
+    """The routers' ``access_control`` section: default deny, one subject and policy per role.
+
+    A router checks what a client sends it (ingress) and what it forwards to a client (egress),
+    so each operation needs both halves: a put is allowed in from its publisher and out to
+    each subscriber; a subscriber must also be allowed to declare itself. A declaration is
+    allowed where a rule's key expression includes it (``alive/*`` inside ``alive/*``, not
+    ``*/stats`` inside ``detector/stats``). A publisher is told of every subscription (egress
+    declare_subscriber on ``**``): Zenoh sends a put only where it knows of a subscriber, and
+    the detector draws image_out only while someone watches."""
+    keys = Keys(namespace)
+    name = lambda key: key if key.startswith("@/") else keys(key)  # noqa: E731 - admin space has no namespace
+    rules, subjects, policies = [], [], []
+    for role in ROLES:
+        granted = permissions(role)
+        role_rules = []
+
+        def add(kind: str, messages: list[str], flows: list[str], key_list) -> None:
+            if key_list:
+                role_rules.append(_rule(f"{role} {kind}", messages, flows, [name(key) for key in key_list]))
+
+        add("put", ["put"], ["ingress"], granted.puts)
+        if granted.puts:
+            # Who subscribes, as declared: a subscription to `*/stats` is not inside
+            # `detector/stats`, and a publisher that never hears of it sends nothing (Zenoh
+            # filters puts nobody wants at the writer). This tells a publisher only that
+            # someone listens, never what is said.
+            role_rules.append(_rule(f"{role} put matching", ["declare_subscriber"], ["egress"], ["**"]))
+        add("subscribe", ["declare_subscriber"], ["ingress"], granted.subscribes)
+        add("subscribe delivery", ["put"], ["egress"], granted.subscribes)
+        add("answer", ["declare_queryable", "reply"], ["ingress"], granted.answers)
+        add("answer queries", ["query"], ["egress"], granted.answers)
+        add("query", ["query"], ["ingress"], granted.queries)
+        add("query replies", ["reply", "declare_queryable"], ["egress"], granted.queries)
+        add("token", ["liveliness_token"], ["ingress"], granted.tokens)
+        add("watch", ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"], granted.watches)
+        add("watch tokens", ["liveliness_token"], ["egress"], granted.watches)
+        rules += role_rules
+        subjects.append({"id": role, "cert_common_names": [client_common_name(role)], "usernames": [role]})
+        policies.append({"id": role, "rules": [rule["id"] for rule in role_rules], "subjects": [role]})
+    if router_names:
+        # Routers of a cluster forward for their own clients, whose rights their own router
+        # checked: between routers everything passes.
+        rules.append(_rule("router", list(ALL_MESSAGES), ["ingress", "egress"], ["**"]))
+        subjects.append({"id": "router", "cert_common_names": [router_common_name(host) for host in router_names],
+                         "usernames": [ROUTER_USER]})
+        policies.append({"id": "router", "rules": ["router"], "subjects": ["router"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+# -- certificates -----------------------------------------------------------------------------
+def client_common_name(role: str) -> str:
+    return f"balltrack {role}"
+
+
+def router_common_name(host: str) -> str:
+    return f"balltrack router {host}"
+
+
+def _private_key():
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    return ec.generate_private_key(ec.SECP256R1())
+
+
+def _key_pem(private_key) -> bytes:
+    from cryptography.hazmat.primitives import serialization
+
+    return private_key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                     serialization.NoEncryption())
+
+
+def _certificate_pem(certificate) -> bytes:
+    from cryptography.hazmat.primitives import serialization
+
+    return certificate.public_bytes(serialization.Encoding.PEM)
+
+
+def _name(common_name: str):
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    return x509.Name([x509.NameAttribute(NameOID.ORGANIZATION_NAME, "balltrack"),
+                      x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
+
+
+def make_authority(days: int = CA_DAYS):
+    """(private key, certificate) of a new certificate authority."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+
+    key = _private_key()
+    now = datetime.datetime.now(datetime.timezone.utc)
+    name = _name("balltrack CA")
+    certificate = (x509.CertificateBuilder().subject_name(name).issuer_name(name)
+                   .public_key(key.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(now - datetime.timedelta(minutes=5))
+                   .not_valid_after(now + datetime.timedelta(days=days))
+                   .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+                   .add_extension(x509.KeyUsage(digital_signature=False, content_commitment=False,
+                                                key_encipherment=False, data_encipherment=False,
+                                                key_agreement=False, key_cert_sign=True, crl_sign=True,
+                                                encipher_only=False, decipher_only=False), critical=True)
+                   .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+                   .sign(key, hashes.SHA256()))
+    return key, certificate
+
+
+def make_leaf(authority, common_name: str, names: list[str] = (), server: bool = False,
+              days: int = LEAF_DAYS):
+    """(private key, certificate) signed by ``authority``; ``names`` become subject alternative
+    names (an IP address literal as an IP entry). Every leaf may act as a TLS client (routers
+    dial other routers); ``server`` ones also as a server."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    authority_key, authority_certificate = authority
+    key = _private_key()
+    now = datetime.datetime.now(datetime.timezone.utc)
+    alternative = []
+    for entry in names:
+        try:
+            alternative.append(x509.IPAddress(ipaddress.ip_address(entry)))
+        except ValueError:
+            alternative.append(x509.DNSName(entry))
+    usages = [ExtendedKeyUsageOID.CLIENT_AUTH] + ([ExtendedKeyUsageOID.SERVER_AUTH] if server else [])
+    builder = (x509.CertificateBuilder().subject_name(_name(common_name))
+               .issuer_name(authority_certificate.subject).public_key(key.public_key())
+               .serial_number(x509.random_serial_number())
+               .not_valid_before(now - datetime.timedelta(minutes=5))
+               .not_valid_after(now + datetime.timedelta(days=days))
+               .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+               .add_extension(x509.KeyUsage(digital_signature=True, content_commitment=False,
+                                            key_encipherment=False, data_encipherment=False,
+                                            key_agreement=False, key_cert_sign=False, crl_sign=False,
+                                            encipher_only=False, decipher_only=False), critical=True)
+               .add_extension(x509.ExtendedKeyUsage(usages), critical=False)
+               .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(authority_key.public_key()),
+                              critical=False))
+    if alternative:
+        builder = builder.add_extension(x509.SubjectAlternativeName(alternative), critical=False)
+    return key, builder.sign(authority_key, hashes.SHA256())
+
+
+# -- the profile folder -----------------------------------------------------------------------
+def _write(path: Path, content: bytes | str, private: bool = False) -> None:
+    data = content.encode() if isinstance(content, str) else content
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # Created with the final mode, so a secret is never readable by others, even briefly.
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    with os.fdopen(descriptor, "wb") as handle:
+        handle.write(data)
+    os.chmod(path, 0o600 if private else 0o644)  # an existing file keeps its mode through open()
+
+
+def _json5(header: str, settings: dict) -> str:
+    comment = "".join(f"// {line}\n".replace("// \n", "//\n") for line in header.strip().splitlines())
+    return comment + json.dumps(settings, indent=2) + "\n"
+
+
+def parse_hosts(text: str) -> list[str]:
+    hosts = [item.strip() for item in text.split(",") if item.strip()]
+    if not hosts:
+        raise ProfileError("--hosts: give at least one host name, e.g. --hosts robot,server")
+    for host in hosts:
+        if host in ROLES or host in RESERVED_NAMES:
+            raise ProfileError(f"--hosts: {host!r} is a role or folder name of the profile; name hosts otherwise")
+        if not re.fullmatch(r"[A-Za-z0-9]([A-Za-z0-9.:-]*[A-Za-z0-9])?", host):
+            raise ProfileError(f"--hosts: {host!r} is not a host name or address")
+    if len(set(hosts)) != len(hosts):
+        raise ProfileError(f"--hosts: a host is named twice in {text!r}")
+    return hosts
+
+
+def router_names(host: str, local: bool) -> list[str]:
+    """The names a router's certificate answers to: its host name, and localhost/127.0.0.1
+    (the address its own host's processes dial) unless ``local`` is off."""
+    return list(dict.fromkeys([host] + (["localhost", "127.0.0.1"] if local else [])))
+
+
+def _endpoint_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PORT, namespace: str = "",
+                 local: bool = True, force: bool = False, days: int = LEAF_DAYS) -> dict:
+    """Write a secure profile into ``directory`` (see the module docstring); a summary.
+
+    Raises ProfileError if the folder already holds a profile and ``force`` is off."""
+    directory = Path(directory)
+    Keys(namespace)  # ValueError for a namespace Zenoh cannot route
+    if not 0 < port < 65536:
+        raise ProfileError(f"--port: {port} is not a TCP port")
+    if directory.exists() and not directory.is_dir():
+        raise ProfileError(f"{directory} exists and is not a folder")
+    existing = [path.name for path in [directory / "ca", *(directory / name for name in (*hosts, *ROLES))]
+                if path.exists()]
+    if existing and not force:
+        raise ProfileError(f"{directory} already holds a profile ({', '.join(existing[:3])}...); "
+                           "--force replaces it (every key and password changes)")
+    for name in existing:  # --force: nothing of the old profile survives beside the new one
+        shutil.rmtree(directory / name)
+
+    authority = make_authority()
+    authority_pem = _certificate_pem(authority[1])
+    _write(directory / "ca" / "ca.pem", authority_pem)
+    _write(directory / "ca" / "ca.key", _key_pem(authority[0]), private=True)
+
+    passwords = {role: secrets.token_urlsafe(24) for role in ROLES}
+    router_password = secrets.token_urlsafe(24)
+    users = "".join(f"{user}:{password}\n" for user, password in
+                    [*passwords.items(), (ROUTER_USER, router_password)])
+    acl = access_control(namespace, hosts if len(hosts) > 1 else [])
+    tls_common = {"root_ca_certificate": "ca.pem", "enable_mtls": True, "verify_name_on_connect": True}
+
+    for host in hosts:
+        folder = directory / host
+        key, certificate = make_leaf(authority, router_common_name(host), router_names(host, local),
+                                     server=True, days=days)
+        _write(folder / "ca.pem", authority_pem)
+        _write(folder / "router.pem", _certificate_pem(certificate))
+        _write(folder / "router.key", _key_pem(key), private=True)
+        _write(folder / "users.txt", users, private=True)
+        settings = {
+            "mode": "router",
+            "listen": {"endpoints": [f"tls/0.0.0.0:{port}"]},
+            "connect": {"endpoints": [], "timeout_ms": -1,
+                        "retry": {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}},
+            "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": True}},
+            "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
+            "transport": {
+                # Only TLS: a plain tcp/ endpoint added by mistake would not even start.
+                "link": {"protocols": ["tls"],
+                         "tls": {**tls_common, "listen_private_key": "router.key", "listen_certificate": "router.pem",
+                                 "connect_private_key": "router.key", "connect_certificate": "router.pem"}},
+                # dictionary_file checks clients; user/password are this router's own, for
+                # joining another host's router (balltrack deploy start --router-connect).
+                "auth": {"usrpwd": {"dictionary_file": "users.txt", "user": ROUTER_USER,
+                                    "password": router_password}},
+            },
+            "access_control": acl,
+        }
+        header = (f"balltrack secure profile: the Zenoh router of host {host}.\n"
+                  f"  balltrack router --secure {directory} --host {host}\n"
+                  f"  (cd {folder} && zenohd -c router.json5)   # paths are relative to this folder\n"
+                  f"Its certificate names: {', '.join(router_names(host, local))}.")
+        _write(folder / ROUTER_CONFIG, _json5(header, settings), private=True)
+
+    local_endpoint = f"tls/localhost:{port}" if local else f"tls/{_endpoint_host(hosts[0])}:{port}"
+    for role, password in passwords.items():
+        folder = directory / role
+        key, certificate = make_leaf(authority, client_common_name(role), days=days)
+        _write(folder / "ca.pem", authority_pem)
+        _write(folder / f"{role}.pem", _certificate_pem(certificate))
+        _write(folder / f"{role}.key", _key_pem(key), private=True)
+        _write(folder / "password", password + "\n", private=True)
+        settings = {
+            "mode": "client",
+            "connect": {"endpoints": [local_endpoint], "timeout_ms": 30000,
+                        "retry": {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}},
+            "scouting": {"multicast": {"enabled": False}},
+            "transport": {
+                "link": {"protocols": ["tls"],
+                         "tls": {**tls_common, "connect_private_key": f"{role}.key",
+                                 "connect_certificate": f"{role}.pem"}},
+                "auth": {"usrpwd": {"user": role, "password": password}},
+            },
+        }
+        header = (f"balltrack secure profile: role {role}.\n"
+                  f"  balltrack run {role} --secure {directory}   (or --zenoh-config, started in this folder)\n"
+                  f"--connect tls/HOST:{port} replaces the endpoint; HOST must be a name of that router's "
+                  "certificate.")
+        if role not in SERVICES:
+            header = header.replace(f"balltrack run {role}", "balltrack status --role " + role)
+        _write(folder / SECURE_CLIENT_CONFIG, _json5(header, settings), private=True)
+    return {"directory": str(directory), "hosts": hosts, "roles": list(ROLES), "port": port,
+            "router_names": {host: router_names(host, local) for host in hosts},
+            "client_endpoint": local_endpoint}
+
+
+def client_files(directory: Path | str, role: str) -> Path:
+    """A role's client config in a profile (for programs that start processes)."""
+    return secure_client_path(directory, role)
+
+
+__all__ = ["ROLES", "Role", "Permissions", "permissions", "access_control", "init_profile", "ProfileError",
+           "parse_hosts", "router_names", "make_authority", "make_leaf", "client_files", "SECURE_FILE_SETTINGS"]
