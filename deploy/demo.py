@@ -1,6 +1,6 @@
 """The demo: a simulated robot finds a tennis ball and drives up to it (the paper's basic run).
 
-    python -m deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS]
+    python -m deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS] [--secure DIR]
 
 Starts a router, the simulator (``chase`` scenario, real-time pacing), the detector, the
 locator and the follower as separate processes under the supervisor (``deploy/launcher.py``),
@@ -42,7 +42,7 @@ from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
-from balltrack.common.session import ArgumentParser, open_session
+from balltrack.common.session import ArgumentParser, open_session, secure_client_path
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.deploy.recording import DEFAULT_KEYS, Recording
@@ -299,14 +299,16 @@ def run(args) -> int:
         print(f"balltrack demo: run folder {run_dir}", flush=True)
         try:
             system = start_system(run_dir, SERVICES, settings, config_dir, args.namespace, args.port,
-                                  wait=args.start_timeout)
+                                  wait=args.start_timeout, secure=args.secure, host=args.host)
         except LaunchError as error:
             print(f"demo: {error}", file=sys.stderr)
             return 1
         endpoint = system.endpoint
         print(f"  router on {endpoint}; watch it from another terminal: balltrack status --connect "
-              f"{endpoint}", flush=True)
-        session = open_session([endpoint], open_timeout=10)
+              f"{endpoint}" + (f" --secure {args.secure}" if args.secure else ""), flush=True)
+        # With a secure profile the demo is its operator: it watches and resets the simulator.
+        session = open_session([endpoint], str(secure_client_path(args.secure, "operator")) if args.secure else None,
+                               open_timeout=10)
         video = None if args.no_video else VideoWriter(run_dir / "video.mp4", 30.0, {})
         if video is not None:
             video.start()
@@ -501,6 +503,10 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--start-timeout", type=float, default=90.0, metavar="SECONDS",
                         help="how long the services may take to come up (default 90)")
     parser.add_argument("--no-video", action="store_true", help="no video.mp4 (saves CPU)")
+    parser.add_argument("--secure", metavar="DIR", help="a secure profile (balltrack secure init): TLS, "
+                        "passwords, access control; the demo is its operator")
+    parser.add_argument("--host", metavar="NAME", help="with --secure: the profile's host whose router runs "
+                        "here (default: the only one)")
     return parser
 
 

@@ -81,21 +81,23 @@ class System:
 def start_system(run_dir: Path | str, services: tuple[str, ...] = SERVICES,
                  settings: dict[str, list[str]] | None = None, config_dir: Path | str | None = None,
                  namespace: str = "", port: int = 0, wait: float = 90.0, output=sys.stdout,
-                 log_level: str = "INFO") -> System:
+                 log_level: str = "INFO", secure: str | Path | None = None, host: str | None = None) -> System:
     """Start a router and ``services`` (in this order) on this host; return once all are alive.
 
     ``settings`` maps a service to ``key=value`` parameters (applied after its file in
     ``config_dir``); ``port`` is the router's preferred port on 127.0.0.1 (0: any free one).
-    Everything gets SIGTERM if this process dies. Raises LaunchError (with everything stopped
+    Everything gets SIGTERM if this process dies. ``secure``: a profile folder (``balltrack secure
+    init``, its certificates naming 127.0.0.1) and its ``host``'s router, over TLS. Raises LaunchError (with everything stopped
     and the ends of the logs in the message) if a process fails or is not alive in ``wait`` s,
     ValueError for a bad namespace."""
-    endpoint = f"tcp/127.0.0.1:{free_port(port)}"
+    endpoint = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port(port)}"
     unknown = set(settings or {}) - set(services)
     if unknown:
         raise LaunchError(f"settings for {', '.join(sorted(unknown))}, which is not among the services")
     specs, info = make_specs(list(services), {name: list(values) for name, values in (settings or {}).items()},
                              router=True, listen=[endpoint], namespace=namespace,
-                             config_dir=str(config_dir) if config_dir else None, log_level=log_level)
+                             config_dir=str(config_dir) if config_dir else None, log_level=log_level,
+                             secure=str(secure) if secure else None, host=host)
     run_dir = Path(run_dir).resolve()
     launched = launch(run_dir, specs, info, wait=wait, output=output, tie_to_parent=True)
     return System(endpoint, run_dir, namespace, tuple(services), launched)
