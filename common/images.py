@@ -12,6 +12,10 @@ import numpy as np
 from balltrack.common.messages import MAX_IMAGE_SIDE, MessageError, header as make_header
 
 _SOF_MARKERS = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+# Pixels one byte of JPEG can hold at most: a uniform frame from OpenCV's encoder has 64, the
+# entropy coder's best case a few hundred. A file that claims far more (100 bytes for 8192x8192)
+# is a lie that would still cost the decoder the whole frame, 200 MB and a second.
+MAX_PIXELS_PER_JPEG_BYTE = 1024
 
 
 def jpeg_size(data: bytes) -> tuple[int, int]:
@@ -46,6 +50,8 @@ def image_to_bgr(message: dict) -> np.ndarray:
         jpeg_width, jpeg_height = jpeg_size(data)
         if (jpeg_width, jpeg_height) != (width, height):
             raise MessageError(f"data: JPEG is {jpeg_width}x{jpeg_height}, message says {width}x{height}")
+        if width * height > MAX_PIXELS_PER_JPEG_BYTE * len(data):
+            raise MessageError(f"data: {len(data)} bytes cannot hold a {width}x{height} JPEG")
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         if image is None or image.shape[:2] != (height, width):
             raise MessageError("data: corrupt JPEG (decoder failed)")

@@ -27,7 +27,7 @@ from balltrack.common.session import ArgumentParser
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
-               "distractors", "real_photos")
+               "distractors", "real_photos", "fuzz")
 TRANSPORTS = ("auto", "in-process", "zenoh")
 
 

@@ -230,3 +230,15 @@ def test_shorten_bounds_any_value():
         assert len(text) < 120 and "\n" not in text
     assert shorten("short") == "short"
     assert math.isnan(float(shorten(float("nan"))))
+
+
+def test_lying_jpeg_is_refused_before_decoding():
+    # A 100-byte file whose frame header (and message) claim 8192 x 8192: decoding it would
+    # allocate the whole 200 MB frame.
+    lie = (b"\xff\xd8\xff\xc0\x00\x11\x08\x20\x00\x20\x00\x03\x01\x22\x00\x02\x11\x01\x03\x11\x01"
+           + bytes(80))
+    message = decode("Image", pack({"header": header(1, 2), "width": 8192, "height": 8192,
+                                    "encoding": "jpeg", "data": lie}))
+    with pytest.raises(MessageError, match="cannot hold"):
+        image_to_bgr(message)
+    assert image_to_bgr(_image("jpeg")).shape == (6, 8, 3)  # a real small JPEG still decodes
