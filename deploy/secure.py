@@ -344,8 +344,10 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
         raise ProfileError(f"--port: {port} is not a TCP port")
     if directory.exists() and not directory.is_dir():
         raise ProfileError(f"{directory} exists and is not a folder")
-    existing = [path.name for path in [directory / "ca", *(directory / name for name in (*hosts, *ROLES))]
-                if path.exists()]
+    # Anything of a previous profile: its CA, its hosts' and roles' folders (even hosts no longer named).
+    previous = [directory / "ca", *(directory / name for name in (*hosts, *ROLES)),
+                *(path.parent for path in directory.glob(f"*/{ROUTER_CONFIG}"))]
+    existing = list(dict.fromkeys(path.name for path in previous if path.exists()))
     if existing and not force:
         raise ProfileError(f"{directory} already holds a profile ({', '.join(existing[:3])}...); "
                            "--force replaces it (every key and password changes)")

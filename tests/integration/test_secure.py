@@ -1,0 +1,282 @@
+"""The secure profile over a real router: who may join, and what each role may do.
+
+A profile is generated into tmp_path (host ``testhost``; its router certificate names
+localhost and 127.0.0.1), the router listens on ``tls/127.0.0.1:PORT`` (a free port), and
+clients dial ``tls/localhost:PORT`` as their role. Zenoh refuses a client it cannot
+authenticate while opening the session: ``zenoh.open`` keeps retrying the link until its
+connect timeout, then raises "Unable to connect to any of [...]" (our SessionOpenError). A
+client that authenticates but matches no role (a password under another role's certificate)
+opens, and every message to or from it is dropped. Frames are small (160x120) to keep the CPU low.
+"""
+
+import json
+import sys
+import time
+
+import pytest
+import zenoh
+
+from balltrack.common.messages import encode, header
+from balltrack.common.network import free_port
+from balltrack.common.session import load_config_file, open_session, secure_client_path
+from balltrack.deploy.secure import init_profile, permissions
+from balltrack.services.simulator.control import send_command
+from tests.harness import Collector, Liveliness, Process
+
+SMALL = ("--set", "width=160", "--set", "height=120")
+# Opening a refused session waits this long (Zenoh retries the link until then).
+REFUSED_OPEN_TIMEOUT = 3.0
+
+
+@pytest.fixture(scope="module")
+def profile(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("profile")
+    init_profile(directory, ["testhost"])
+    return directory
+
+
+@pytest.fixture
+def secure_router(profile, tmp_path):
+    port = free_port()
+    process = Process([sys.executable, "-m", "balltrack", "router", "--secure", str(profile),
+                       "--listen", f"tls/127.0.0.1:{port}"], tmp_path / "router.log")
+    process.wait_for_output("listening on", 20)
+    yield port
+    assert process.stop() == 0, process.output()
+
+
+@pytest.fixture
+def as_role(profile, secure_router):
+    """``as_role("locator")``: a session opened with that role's client config."""
+    opened = []
+
+    def open_as(role: str):
+        session = open_session([f"tls/localhost:{secure_router}"], str(secure_client_path(profile, role)),
+                               open_timeout=10)
+        opened.append(session)
+        return session
+
+    yield open_as
+    for session in opened:
+        session.close()
+
+
+@pytest.fixture
+def simulator(profile, secure_router, as_role, tmp_path):
+    """The simulator as its role, realtime; the robot moves only when commanded."""
+    process = Process([sys.executable, "-m", "balltrack.services.simulator", "--secure", str(profile),
+                       "--connect", f"tls/localhost:{secure_router}", *SMALL, "--set", "pacing=realtime",
+                       "--set", "cmd_timeout=0.5"], tmp_path / "simulator.log")
+    Liveliness(as_role("operator")).wait("simulator", timeout=40)
+    yield process
+    assert process.stop() == 0, process.output()
+
+
+def role_config(profile, role: str, port: int, **changes):
+    config = load_config_file(secure_client_path(profile, role))
+    config.insert_json5("connect/endpoints", json.dumps([f"tls/localhost:{port}"]))
+    config.insert_json5("connect/timeout_ms", str(int(REFUSED_OPEN_TIMEOUT * 1000)))
+    for setting, value in changes.items():
+        config.insert_json5(setting.replace(".", "/"), json.dumps(value))
+    return config
+
+
+def assert_refused(config):
+    with pytest.raises(zenoh.ZError, match="Unable to connect to any of"):
+        zenoh.open(config)
+
+
+def twist(linear: float, angular: float) -> bytes:
+    return encode("Twist", {"header": header(0, 0, "base_link"), "linear": [linear, 0.0, 0.0],
+                            "angular": [0.0, 0.0, angular]})
+
+
+def put_until_seen(session, key: str, payload: bytes, collector: Collector, timeout: float = 10) -> None:
+    """Put until ``collector`` has it: a new subscription takes a moment to reach publishers,
+    and until then Zenoh drops puts at the writer."""
+    deadline = time.monotonic() + timeout
+    while True:
+        session.put(key, payload)
+        try:
+            collector.wait_for(lambda messages: any(m["payload"] == payload for m in messages), 0.2, "")
+            return
+        except AssertionError:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{payload!r} on {key} never reached the subscriber") from None
+
+
+def moved(before: dict, after: dict) -> float:
+    return (abs(after["robot"]["x"] - before["robot"]["x"]) + abs(after["robot"]["y"] - before["robot"]["y"])
+            + abs(after["robot"]["yaw"] - before["robot"]["yaw"]))
+
+
+def command_for_frames(session, truths: Collector, frames: int) -> tuple[dict, dict]:
+    """Put cmd_vel every third frame for ``frames`` frames; (ground truth before, after)."""
+    before = truths.wait_for(lambda messages: messages and messages[-1], 20, "a ground truth")
+    seq = before["header"]["seq"]
+    while seq < before["header"]["seq"] + frames:
+        session.put("cmd_vel", twist(0.4, 0.8))
+        seq = truths.wait_for(lambda messages, target=seq + 3: next(
+            (m for m in messages if m["header"]["seq"] >= target), None), 20, "3 frames more")["header"]["seq"]
+    return before, truths.messages[-1]
+
+
+# -- who may join -----------------------------------------------------------------------------
+def test_a_client_of_the_profile_joins(profile, secure_router):
+    session = zenoh.open(role_config(profile, "locator", secure_router))
+    assert len(session.info.routers_zid()) == 1
+    session.close()
+
+
+def test_without_a_certificate_the_session_is_refused(profile, secure_router):
+    # The right user and password, but no client certificate (mTLS off on this side).
+    assert_refused(role_config(profile, "locator", secure_router, **{"transport.link.tls.enable_mtls": False}))
+
+
+def test_a_wrong_password_is_refused(profile, secure_router):
+    assert_refused(role_config(profile, "locator", secure_router,
+                               **{"transport.auth.usrpwd.password": "not-the-password"}))
+
+
+def test_plain_tcp_is_refused(profile, secure_router):
+    # The router listens for TLS only: a plain TCP client on its port never completes a session.
+    config = role_config(profile, "locator", secure_router, **{"transport.link.protocols": ["tcp", "tls"]})
+    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{secure_router}"]))
+    assert_refused(config)
+
+
+def test_a_router_address_its_certificate_does_not_name_is_refused(profile, secure_router):
+    config = role_config(profile, "locator", secure_router)
+    config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.2:{secure_router}"]))
+    assert_refused(config)
+
+
+def test_service_without_credentials_exits_with_one_line(profile, secure_router, tmp_path, monkeypatch):
+    # A plain `--connect tcp/...` service, as before the profile: it cannot join.
+    monkeypatch.setenv("BALLTRACK_OPEN_TIMEOUT", str(REFUSED_OPEN_TIMEOUT))
+    process = Process([sys.executable, "-m", "balltrack.services.detector", "--connect",
+                       f"tcp/127.0.0.1:{secure_router}"], tmp_path / "plain.log")
+    process.popen.wait(60)
+    assert process.popen.returncode == 1
+    assert "cannot reach a Zenoh router" in process.output()
+
+
+def test_a_password_under_another_roles_certificate_matches_no_role(profile, secure_router, as_role):
+    password = (profile / "detector" / "password").read_text().strip()
+    mixed = zenoh.open(role_config(profile, "locator", secure_router, **{
+        "transport.auth.usrpwd.user": "detector", "transport.auth.usrpwd.password": password}))
+    operator = as_role("operator")
+    detector = as_role("detector")
+    seen = Collector(operator, "detected_ball", None)
+    mixed_frames = Collector(mixed, "camera/image_raw", None)
+    simulator_session = as_role("simulator")
+    frames = Collector(operator, "camera/image_raw", None)
+    put_until_seen(detector, "detected_ball", b"from the detector", seen)
+    mixed.put("detected_ball", b"from the mixed identity")
+    put_until_seen(simulator_session, "camera/image_raw", b"a frame", frames)
+    put_until_seen(detector, "detected_ball", b"from the detector, later", seen)
+    assert {m["payload"] for m in seen.messages} == {b"from the detector", b"from the detector, later"}
+    assert mixed_frames.messages == []
+    mixed.close()
+
+
+# -- what each role may do ----------------------------------------------------------------------
+def test_only_the_follower_role_moves_the_robot(simulator, as_role):
+    truths = Collector(as_role("viewer"), "sim/ground_truth", "GroundTruth")
+    commands = Collector(as_role("operator"), "cmd_vel", None)
+    for role in ("locator", "viewer", "detector"):
+        before, after = command_for_frames(as_role(role), truths, 30)
+        assert moved(before, after) == 0.0, f"{role}'s cmd_vel moved the robot"
+    assert commands.messages == []  # nor did any of them reach another subscriber
+    before, after = command_for_frames(as_role("follower"), truths, 30)
+    assert moved(before, after) > 0.1
+    assert commands.messages
+
+
+def test_viewer_watches_but_its_puts_and_queries_are_dropped(simulator, as_role):
+    viewer, operator, detector = as_role("viewer"), as_role("operator"), as_role("detector")
+    frames = Collector(viewer, "camera/image_raw", "Image")
+    frames.wait_count(3, 20)
+    balls = Collector(operator, "detected_ball", None)
+    put_until_seen(detector, "detected_ball", b"from the detector", balls)
+    viewer.put("detected_ball", b"from the viewer")
+    put_until_seen(detector, "detected_ball", b"from the detector, later", balls)
+    assert {m["payload"] for m in balls.messages} == {b"from the detector", b"from the detector, later"}
+    # sim/control: the viewer gets no answer, the operator does.
+    assert not send_command(viewer, {"op": "reset"}, timeout=2)["ok"]
+    assert send_command(operator, {"op": "reset"}, timeout=5)["ok"]
+
+
+def test_a_role_declares_only_its_own_liveliness_token(as_role):
+    locator, operator = as_role("locator"), as_role("operator")
+    tokens = Liveliness(operator)
+    forged = locator.liveliness().declare_token("alive/follower")
+    own = locator.liveliness().declare_token("alive/locator")
+    tokens.wait("locator", timeout=10)
+    names = {str(reply.ok.key_expr) for reply in operator.liveliness().get("alive/*", timeout=3) if reply.ok}
+    assert names == {"alive/locator"}
+    forged.undeclare()
+    own.undeclare()
+
+
+def test_only_the_simulator_may_answer_sim_control(as_role):
+    operator = as_role("operator")
+    for role, answered in (("locator", False), ("follower", False), ("simulator", True)):
+        answering = as_role(role).declare_queryable("sim/control", lambda query: query.reply(
+            "sim/control", encode("SimReply", {"ok": True})))
+        assert send_command(operator, {"op": "reset"}, timeout=2)["ok"] == answered, role
+        answering.undeclare()
+
+
+def test_the_secure_system_runs_alive_with_stats_and_data(profile, tmp_path):
+    """Every core service under its role: alive, publishing stats, the pipeline flowing to cmd_vel."""
+    from balltrack.deploy.launcher import SERVICES as CORE, start_system
+
+    settings = {"simulator": ["width=320", "height=240", "pacing=realtime"], "follower": ["use_sim_time=true"]}
+    with start_system(tmp_path / "run", CORE, settings, secure=profile, output=None) as system:
+        assert system.endpoint.startswith("tls/127.0.0.1:")
+        session = open_session([system.endpoint], str(secure_client_path(profile, "viewer")), open_timeout=10)
+        stats = Collector(session, "*/stats", "Stats")
+        balls = Collector(session, "detected_ball_3d", "Ball3D")
+        commands = Collector(session, "cmd_vel", "Twist")
+        stats.wait_for(lambda messages: {m["service"] for m in messages} >= set(CORE), 30, "stats of every service")
+        balls.wait_count(5, 30)
+        commands.wait_count(5, 30)
+        assert all(m["rejected"] == 0 for m in stats.messages)
+        session.close()
+        assert system.stop() == 0
+
+
+def test_roles_grant_what_the_services_declare(tmp_path):
+    """The ROLES table against the services' real declarations, read from a plain (no access
+    control) router's admin space: each service declares exactly the subscriptions and
+    queryables, publishers and tokens its role grants."""
+    from balltrack.deploy.launcher import SERVICES as CORE, start_system
+
+    settings = {"simulator": ["width=160", "height=120", "pacing=lockstep"], "follower": ["use_sim_time=true"]}
+    with start_system(tmp_path / "run", CORE, settings, output=None) as system:
+        session = open_session([system.endpoint], open_timeout=10)
+        declared: dict[str, dict[str, set[str]]] = {}
+        zids: dict[str, set[str]] = {}
+        for reply in session.get("@/*/router/**", timeout=5):
+            if reply.ok is None:
+                continue
+            parts = str(reply.ok.key_expr).split("/")
+            if len(parts) < 5 or parts[3] not in ("publisher", "subscriber", "queryable", "token"):
+                continue
+            holders = json.loads(reply.ok.payload.to_bytes())
+            key = "/".join(parts[4:])
+            for zid in holders.get("clients", []):
+                declared.setdefault(zid, {}).setdefault(parts[3], set()).add(key)
+                if parts[3] == "token" and key.startswith("alive/"):
+                    zids.setdefault(key.split("/", 1)[1], set()).add(zid)
+        session.close()
+    assert set(zids) == set(CORE)
+    for service in CORE:
+        (zid,) = zids[service]
+        granted = permissions(service)
+        entities = declared[zid]
+        assert entities.get("subscriber", set()) == set(granted.subscribes), (service, entities)
+        assert entities.get("queryable", set()) == set(granted.answers), (service, entities)
+        assert entities.get("token", set()) == set(granted.tokens), (service, entities)
+        assert entities.get("publisher", set()) == set(granted.puts), (service, entities)

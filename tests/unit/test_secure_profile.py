@@ -1,0 +1,155 @@
+"""balltrack secure init: the files, their modes, the certificates and the access rules."""
+
+import ipaddress
+import stat
+
+import pytest
+import zenoh
+from cryptography import x509
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from balltrack.cli import main
+from balltrack.common import keys as key_table
+from balltrack.common.keys import SERVICES
+from balltrack.common.session import load_config_file
+from balltrack.deploy.secure import ROLES, ProfileError, access_control, init_profile, parse_hosts, permissions
+
+
+@pytest.fixture(scope="module")
+def profile(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("profile") / "secure"
+    init_profile(directory, ["robot", "192.168.1.10"])
+    return directory
+
+
+def mode(path) -> int:
+    return stat.S_IMODE(path.stat().st_mode)
+
+
+def certificate(path) -> x509.Certificate:
+    return x509.load_pem_x509_certificate(path.read_bytes())
+
+
+def common_name(cert: x509.Certificate) -> str:
+    return cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value
+
+
+def test_secrets_are_private_and_certificates_readable(profile):
+    private = [profile / "ca" / "ca.key"]
+    for host in ("robot", "192.168.1.10"):
+        private += [profile / host / name for name in ("router.key", "users.txt", "router.json5")]
+    for role in ROLES:
+        private += [profile / role / name for name in (f"{role}.key", "password", "client.json5")]
+    assert {path.name: mode(path) for path in private} == {path.name: 0o600 for path in private}
+    assert mode(profile / "ca" / "ca.pem") == 0o644 and mode(profile / "robot" / "router.pem") == 0o644
+
+
+def test_router_certificates_name_the_host_and_localhost(profile, tmp_path):
+    authority = certificate(profile / "ca" / "ca.pem")
+    router = certificate(profile / "robot" / "router.pem")
+    router.verify_directly_issued_by(authority)
+    names = router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert names.get_values_for_type(x509.DNSName) == ["robot", "localhost"]
+    assert names.get_values_for_type(x509.IPAddress) == [ipaddress.ip_address("127.0.0.1")]
+    by_address = certificate(profile / "192.168.1.10" / "router.pem")
+    addresses = by_address.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert ipaddress.ip_address("192.168.1.10") in addresses.get_values_for_type(x509.IPAddress)
+    usages = router.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
+    assert set(usages) == {ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH}
+
+    init_profile(tmp_path / "remote", ["robot"], local=False)
+    remote = certificate(tmp_path / "remote" / "robot" / "router.pem")
+    assert remote.extensions.get_extension_for_class(x509.SubjectAlternativeName).value \
+        .get_values_for_type(x509.DNSName) == ["robot"]
+
+
+def test_each_role_has_a_certificate_a_password_and_a_users_entry(profile):
+    authority = certificate(profile / "ca" / "ca.pem")
+    users = dict(line.split(":", 1) for line in (profile / "robot" / "users.txt").read_text().splitlines())
+    assert set(users) == set(ROLES) | {"router"}
+    passwords = set()
+    for role in ROLES:
+        cert = certificate(profile / role / f"{role}.pem")
+        cert.verify_directly_issued_by(authority)
+        assert common_name(cert) == f"balltrack {role}"
+        password = (profile / role / "password").read_text().strip()
+        assert users[role] == password and len(password) >= 24
+        passwords.add(password)
+        config = load_config_file(profile / role / "client.json5")
+        assert config.get_json("mode") == '"client"'
+        assert config.get_json("transport/auth/usrpwd/user") == f'"{role}"'
+        assert config.get_json("transport/link/tls/enable_mtls") == "true"
+        # File names resolve next to the config, wherever the folder was copied.
+        assert config.get_json("transport/link/tls/connect_certificate") == f'"{profile.resolve() / role / (role + ".pem")}"'
+    assert len(passwords) == len(ROLES)
+    router = load_config_file(profile / "robot" / "router.json5")
+    assert router.get_json("transport/auth/usrpwd/dictionary_file") == f'"{profile.resolve() / "robot" / "users.txt"}"'
+    assert router.get_json("listen/endpoints") == '["tls/0.0.0.0:7447"]'
+    assert router.get_json("access_control/default_permission") == '"deny"'
+    assert isinstance(zenoh.Config.from_file(str(profile / "robot" / "router.json5")), zenoh.Config)
+
+
+def test_a_second_init_refuses_without_force(profile, capsys):
+    before = (profile / "robot" / "router.key").read_bytes()
+    assert main(["secure", "init", str(profile), "--hosts", "robot"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "--force" in error
+    assert (profile / "robot" / "router.key").read_bytes() == before
+
+
+def test_force_replaces_every_key(tmp_path, capsys):
+    assert main(["secure", "init", str(tmp_path / "p"), "--hosts", "a,b"]) == 0
+    old = (tmp_path / "p" / "a" / "router.key").read_bytes()
+    assert main(["secure", "init", str(tmp_path / "p"), "--hosts", "a", "--force"]) == 0
+    assert (tmp_path / "p" / "a" / "router.key").read_bytes() != old
+    assert not (tmp_path / "p" / "b").exists()
+
+
+@pytest.mark.parametrize("hosts", ["", "detector", "a,a", "bad host", "ca"])
+def test_bad_host_lists_are_one_line_errors(hosts, tmp_path, capsys):
+    with pytest.raises(ProfileError):
+        parse_hosts(hosts)
+    assert main(["secure", "init", str(tmp_path / "p"), "--hosts", hosts]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert not (tmp_path / "p").exists()
+
+
+def roles_that(kind: str, key: str) -> set[str]:
+    return {role for role in ROLES if key in getattr(permissions(role), kind)}
+
+
+def test_who_may_move_the_robot_and_publish_frames():
+    assert roles_that("puts", key_table.CMD_VEL) == {"follower", "operator"}
+    assert roles_that("puts", key_table.IMAGE_RAW) == {"simulator", "camera", "ros2_bridge"}
+    assert roles_that("answers", key_table.SIM_CONTROL) == {"simulator"}
+    assert roles_that("queries", key_table.SIM_CONTROL) == {"operator"}
+
+
+def test_each_service_owns_its_stats_config_and_token_only():
+    for role in ROLES:
+        granted = permissions(role)
+        if role in SERVICES:
+            assert f"{role}/stats" in granted.puts and f"{role}/config" in granted.answers
+            assert granted.tokens == (f"alive/{role}",)
+            assert not any(key.endswith("/stats") and key != f"{role}/stats" for key in granted.puts)
+        else:
+            assert granted.tokens == () and granted.answers == ()
+    assert set(SERVICES) <= set(ROLES)
+    viewer = permissions("viewer")
+    assert viewer.puts == () and viewer.queries == ("@/**",) and viewer.subscribes == ("**",)
+
+
+def test_access_control_subjects_need_both_certificate_and_user(tmp_path):
+    acl = access_control("robot1", ["a", "b"])
+    rules = {rule["id"]: rule for rule in acl["rules"]}
+    assert acl["default_permission"] == "deny"
+    assert all(rule["permission"] == "allow" for rule in acl["rules"])
+    subjects = {subject["id"]: subject for subject in acl["subjects"]}
+    assert subjects["locator"] == {"id": "locator", "cert_common_names": ["balltrack locator"],
+                                   "usernames": ["locator"]}
+    assert subjects["router"]["cert_common_names"] == ["balltrack router a", "balltrack router b"]
+    assert rules["follower put"]["key_exprs"] == ["robot1/cmd_vel", "robot1/follower/stats"]
+    assert rules["viewer query"]["key_exprs"] == ["@/**"]  # the admin space has no namespace
+    for policy in acl["policies"]:
+        assert all(rules[rule]["id"].split()[0] == policy["subjects"][0] for rule in policy["rules"])
+    assert "router" not in {subject["id"] for subject in access_control("", [])["subjects"]}
