@@ -280,3 +280,29 @@ def test_roles_grant_what_the_services_declare(tmp_path):
         assert entities.get("queryable", set()) == set(granted.answers), (service, entities)
         assert entities.get("token", set()) == set(granted.tokens), (service, entities)
         assert entities.get("publisher", set()) == set(granted.puts), (service, entities)
+
+
+def test_two_hosts_routers_join_and_keep_the_rules(tmp_path):
+    """A router per host (both on this machine), the second joining the first: a follower on
+    one host moves commands to a simulator on the other, a locator's do not cross."""
+    directory = tmp_path / "profile"
+    init_profile(directory, ["hosta", "hostb"])
+    first, second = free_port(), free_port()
+    routers = [Process([sys.executable, "-m", "balltrack", "router", "--secure", str(directory), "--host", "hosta",
+                        "--listen", f"tls/127.0.0.1:{first}"], tmp_path / "a.log")]
+    routers[0].wait_for_output("listening on", 20)
+    routers.append(Process([sys.executable, "-m", "balltrack", "router", "--secure", str(directory), "--host", "hostb",
+                            "--listen", f"tls/127.0.0.1:{second}", "--connect", f"tls/localhost:{first}"],
+                           tmp_path / "b.log"))
+    routers[1].wait_for_output("listening on", 20)
+    as_role = lambda role, port: open_session([f"tls/localhost:{port}"],  # noqa: E731
+                                              str(secure_client_path(directory, role)), open_timeout=10)
+    simulator, follower, locator = as_role("simulator", first), as_role("follower", second), as_role("locator", second)
+    commands = Collector(simulator, "cmd_vel", None)
+    put_until_seen(follower, "cmd_vel", b"from the follower", commands, timeout=20)
+    locator.put("cmd_vel", b"from the locator")
+    put_until_seen(follower, "cmd_vel", b"from the follower, later", commands)
+    assert b"from the locator" not in {message["payload"] for message in commands.messages}
+    for session in (simulator, follower, locator):
+        session.close()
+    assert [router.stop() for router in routers] == [0, 0]

@@ -147,7 +147,7 @@ def test_access_control_subjects_need_both_certificate_and_user(tmp_path):
     subjects = {subject["id"]: subject for subject in acl["subjects"]}
     assert subjects["locator"] == {"id": "locator", "cert_common_names": ["balltrack locator"],
                                    "usernames": ["locator"]}
-    assert subjects["router"]["cert_common_names"] == ["balltrack router a", "balltrack router b"]
+    assert subjects["router"] == {"id": "router", "cert_common_names": ["balltrack router a", "balltrack router b"]}
     assert rules["follower put"]["key_exprs"] == ["robot1/cmd_vel", "robot1/follower/stats"]
     assert rules["viewer query"]["key_exprs"] == ["@/**"]  # the admin space has no namespace
     for policy in acl["policies"]:
