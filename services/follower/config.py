@@ -48,5 +48,12 @@ class FollowerConfig:
     target_hold_secs: float = param(0.3, "how long (s) other balls are ignored after the target was last "
                                          "matched", low=0)
 
+    # Off by default: the paper's node commands only from its timer. On, the command leaves as
+    # soon as the detection is in (one frame's latency instead of up to a timer period) while the
+    # timer still runs, as the watchdog that starts the search and as the lockstep simulator's tick.
+    command_on_detection: bool = param(False, "also publish cmd_vel for every detection message, at once "
+                                              "(no `time` field: only the rate_hz timer's commands are "
+                                              "ticks); the timer keeps publishing and searching")
+
     def __post_init__(self):
         check_fields(self)

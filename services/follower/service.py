@@ -5,10 +5,12 @@ Subscribes: ``detected_balls`` (Ball2DArray) to keep one target among several ba
 does (``keep_target=false``); ``clock`` (Clock) when ``use_sim_time`` is set.
 Publishes: ``cmd_vel`` (Twist) from a ``rate_hz`` timer (10 Hz) on the configured clock. While
 tracking, the header is the newest detection's (so latency from frame capture to command can
-be measured); while searching, it carries the current time.
+be measured); while searching, it carries the current time. With ``command_on_detection`` a
+command is also published from each detection message's callback, at once, with that message's
+header and without the ``time`` field, so a lockstep simulator still paces on the timer's ticks.
 
 Example:
-    python -m services.follower --connect tcp/127.0.0.1:7447 --set max_size_thresh=0.3 --set use_sim_time=true
+    balltrack run follower --connect tcp/127.0.0.1:7447 --set max_size_thresh=0.3 --set use_sim_time=true
 """
 
 import threading
@@ -27,6 +29,24 @@ def build(service: ServiceContext):
     last_header = {"header": None}
     service.on_config_change(lambda config: controller.update_config(config))
 
+    def publish(command, header: dict, tick_ns: int | None) -> None:
+        # Only the contract's header fields travel on: whatever else a peer put into the
+        # detection's header must not be repeated in every command (ten times a second).
+        # ``time`` (the clock at this tick) and ``mode`` are fields added to the contract's Twist:
+        # a lockstep simulator waits for the tick stamped with its frame time, so a command sent
+        # on a detection carries no ``time``.
+        message = {"header": {"stamp": header["stamp"], "frame_id": "base_link", "seq": header["seq"]},
+                   "mode": command.mode,
+                   "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]}
+        if tick_ns is not None:
+            message["time"] = tick_ns
+        output.put(message)
+
+    def command_now(frame_header: dict) -> None:
+        """With ``command_on_detection``: answer this detection message at once (under the lock)."""
+        if service.config.command_on_detection:
+            publish(controller.tick(service.clock.now()), frame_header, None)
+
     def on_ball(ball: dict) -> None:
         if service.config.keep_target:
             return
@@ -34,6 +54,7 @@ def build(service: ServiceContext):
             if not controller.on_detection(ball["x"], ball["z"], service.clock.now()):
                 raise MessageError("detection ignored: x or z out of range")
             last_header["header"] = ball["header"]
+            command_now(ball["header"])
 
     def on_balls(frame: dict) -> None:
         if not service.config.keep_target:
@@ -43,6 +64,9 @@ def build(service: ServiceContext):
             target = controller.choose(frame["balls"], now)
             if target is not None and controller.on_detection(target["x"], target["z"], now):
                 last_header["header"] = frame["header"]
+            # Every frame is answered, with or without the target in it: a follower of the
+            # frames, one command each, whose mode says what the controller made of it.
+            command_now(frame["header"])
 
     def tick() -> None:
         with lock:
@@ -53,13 +77,7 @@ def build(service: ServiceContext):
             header = last_header["header"]
         if command.mode == SEARCH or header is None:
             header = {"stamp": now_ns, "seq": header["seq"] if header else 0}
-        # Only the contract's header fields travel on: whatever else a peer put into the
-        # detection's header must not be repeated in every command (ten times a second).
-        # ``time`` (the clock at this tick) and ``mode`` are fields added to the contract's Twist:
-        # a lockstep simulator waits for the tick stamped with its frame time.
-        output.put({"header": {"stamp": header["stamp"], "frame_id": "base_link", "seq": header["seq"]},
-                    "time": now_ns, "mode": command.mode,
-                    "linear": [command.linear, 0.0, 0.0], "angular": [0.0, 0.0, command.angular]})
+        publish(command, header, now_ns)
 
     # Both are subscribed so that keep_target can be switched live.
     service.subscribe(keys.DETECTED_BALL, "Ball2D", on_ball)

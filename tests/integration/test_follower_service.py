@@ -105,3 +105,33 @@ def test_keeps_its_target_among_several_balls(session, start_follower):
     command = commands.wait_for(lambda m: [c for c in m if c["header"]["seq"] == 2], 5, "kept")[-1]
     assert command["angular"][2] < 0
     assert command["angular"][2] == pytest.approx(-0.7 * (0.9 * 0.4 + 0.1 * 0.38))
+
+
+def test_command_on_detection_answers_every_frame_at_once(session, start_follower):
+    # A long timer period: the timer's commands (with ``time``) are few, the event ones are not.
+    start_follower("keep_target=true", "command_on_detection=true", "rate_hz=1")
+    commands = Collector(session, "cmd_vel", "Twist")
+
+    def frame(seq, *balls):
+        return encode("Ball2DArray", {"header": header(seq * 1000, seq), "balls": [
+            {key: value for key, value in detection(x, z, seq).items() if key != "header"}
+            for x, z in balls]})
+
+    def events(messages):
+        return [command for command in messages if "time" not in command]
+
+    sent = list(range(1, 11))
+    for seq in sent:
+        # Frame 6 has no ball: it is answered too, with the held command.
+        session.put("detected_balls", frame(seq) if seq == 6 else frame(seq, (0.4, 0.05)))
+        commands.wait_for(lambda m, seq=seq: [c for c in events(m) if c["header"]["seq"] == seq], 5,
+                          f"command for frame {seq}")
+    answered = events(commands.messages)
+    assert [command["header"]["seq"] for command in answered] == sent
+    assert [command["header"]["stamp"] for command in answered] == [seq * 1000 for seq in sent]
+    assert {command["mode"] for command in answered} == {"chase"}
+    assert answered[0]["angular"][2] == pytest.approx(-0.28)
+    # The timer still runs as the watchdog, and its ticks alone carry ``time``.
+    ticks = commands.wait_for(lambda m: [c for c in m if "time" in c and c["mode"] == "search"
+                                         and c["header"]["seq"] == 10], 10, "search after the frames stop")
+    assert ticks[-1]["angular"][2] == pytest.approx(-0.5)

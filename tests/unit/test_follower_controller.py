@@ -292,3 +292,28 @@ def test_target_gate_is_validated():
         FollowerConfig(target_hold_secs=-1.0)
     with pytest.raises(ConfigError, match="keep_target"):
         FollowerConfig(keep_target="yes")
+
+
+# --- command_on_detection: the service asks for a command right after each detection ---------
+
+def test_command_on_detection_is_off_by_default_and_a_declared_parameter():
+    assert FollowerConfig().command_on_detection is False
+    config = load_config(FollowerConfig, overrides=["command_on_detection=true"])
+    assert config.command_on_detection is True
+    with pytest.raises(ConfigError, match="^command_on_detection"):
+        load_config(FollowerConfig, overrides=["command_on_detection=often"])
+
+
+def test_command_at_the_detection_time_uses_that_detection():
+    # The event path is on_detection(now) then tick(now) under one lock: the command must
+    # already include the detection just taken in, not wait for the next timer tick.
+    follower = controller(command_on_detection=True)
+    assert follower.on_detection(0.4, 0.05, 3.0)
+    assert follower.tick(3.0) == Command(0.1, -0.7 * 0.4, CHASE)
+    assert follower.on_detection(0.2, 0.5, 3.033)
+    command = follower.tick(3.033)
+    assert command.mode == CHASE and command.angular == pytest.approx(-0.7 * (0.9 * 0.4 + 0.1 * 0.2))
+    # A frame without the target is answered with the held command, then the timer searches.
+    assert follower.choose([], 3.066) is None
+    assert follower.tick(3.066).mode == CHASE
+    assert follower.tick(3.033 + 1.01) == Command(0.0, -0.5, SEARCH)
