@@ -7,7 +7,7 @@ topics map to keys by dropping the leading slash, as zenoh-bridge-ros2dds does.
 
 from dataclasses import dataclass
 
-# What `python -m deploy start` runs by default; the ROS 2 bridge is started on request.
+# What `balltrack deploy start` runs by default; the ROS 2 bridge is started on request.
 CORE_SERVICES = ("detector", "locator", "follower", "simulator")
 # The camera publishes what the simulator does, from a real camera: one or the other runs.
 SERVICES = (*CORE_SERVICES, "ros2_bridge", "camera")

@@ -1,8 +1,9 @@
-"""Running balltrack: a supervisor and launcher, the demo, Zenoh configs and setup scripts.
+"""Running balltrack: the supervisor and launcher, the demo, Zenoh configs, recordings, the
+secure profile and setup scripts.
 
-    python -m deploy start --router            # router + four services, in the background
-    python -m deploy status                    # pids, restarts, liveliness and stats
-    python -m deploy stop
-    python -m deploy.demo                      # the robot chases a ball; summary and pictures
-    python -m deploy.params                    # the README's parameter tables
+    balltrack deploy start --router            # router + four services, in the background
+    balltrack status --run-dir runs/default    # pids, restarts, liveliness and stats
+    balltrack deploy stop
+    python -m balltrack.deploy.demo            # the robot chases a ball; summary and pictures
+    python -m balltrack.deploy.params --write  # the README's parameter tables
 """

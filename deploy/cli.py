@@ -1,18 +1,19 @@
-"""``python -m deploy start|stop|status``: run balltrack under the supervisor, in one run folder.
+"""``balltrack deploy start|stop`` (or ``python -m balltrack.deploy``): run balltrack under the
+supervisor, in one run folder.
 
-    python -m deploy start --router                          # router + four services (one host)
-    python -m deploy start --router --listen tcp/0.0.0.0:7447 --services detector,locator,follower
-    python -m deploy start --connect tcp/192.168.1.10:7447 --services detector --namespace robot1
-    python -m deploy start --router --config-dir deploy/config/demo --set follower.max_size_thresh=0.3
-    python -m deploy start --router --secure secure/                 # TLS, passwords, access control
-    python -m deploy status [--json]
-    python -m deploy stop
+    balltrack deploy start --router                          # router + four services (one host)
+    balltrack deploy start --router --listen tcp/0.0.0.0:7447 --services detector,locator,follower
+    balltrack deploy start --connect tcp/192.168.1.10:7447 --services detector --namespace robot1
+    balltrack deploy start --router --set follower.max_size_thresh=0.3
+    balltrack deploy start --router --secure secure/         # TLS, passwords, access control
+    balltrack status --run-dir runs/default                  # pids, restarts, liveliness, stats
+    balltrack deploy stop
 
 ``start`` writes ``launch.json`` into the run folder (default ``runs/default``), starts the
 supervisor in the background and returns once every service has declared its liveliness token
 (``--wait`` seconds at most; ``--foreground`` keeps the supervisor in this terminal instead, Ctrl-C
-stops it). ``stop`` sends the supervisor SIGTERM and waits for it; ``status`` shows pids,
-restarts and, from the network, which services are alive and their stats.
+stops it). ``stop`` sends the supervisor SIGTERM and waits for it. The one status command is
+``balltrack status``; with ``--run-dir`` it adds the supervisor's pids, restarts and last exits.
 """
 
 import argparse
@@ -237,12 +238,12 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
     """Start a supervisor in the background; return once the services are alive.
 
     ``tie_to_parent``: the supervisor (and so everything) gets SIGTERM if this process dies
-    (the demo); without it the supervisor outlives ``python -m deploy start``. ``output``
+    (the demo); without it the supervisor outlives ``balltrack deploy start``. ``output``
     (None: quiet) gets a line once the supervisor runs and once the services are alive.
     Raises LaunchError (with the supervisor stopped) if it cannot start or a service fails."""
     run_dir = Path(run_dir).resolve()
     if running_supervisor(run_dir):
-        raise LaunchError(f"a supervisor already runs in {run_dir} (python -m deploy stop --run-dir {run_dir})")
+        raise LaunchError(f"a supervisor already runs in {run_dir} (balltrack deploy stop --run-dir {run_dir})")
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "status.json").unlink(missing_ok=True)
     save_launch(run_dir, specs, {**info, "run_dir": str(run_dir)})
@@ -331,8 +332,8 @@ def command_start(args) -> int:
     except LaunchError as error:
         print(f"deploy start: {error}", file=sys.stderr)
         return 1
-    print(f"logs in {run_dir}; python -m deploy status --run-dir {args.run_dir}; "
-          f"python -m deploy stop --run-dir {args.run_dir}")
+    print(f"logs in {run_dir}; balltrack status --run-dir {args.run_dir}; "
+          f"balltrack deploy stop --run-dir {args.run_dir}")
     return 0
 
 
@@ -358,33 +359,6 @@ def collect_status(run_dir: Path, timeout: float, network: bool = True) -> dict:
                 child["alive"] = None if alive is None else name in alive
                 child["stats"] = stats.get(name)
     return result
-
-
-def command_status(args) -> int:
-    run_dir = Path(args.run_dir).resolve()
-    result = collect_status(run_dir, args.timeout, network=not args.no_network)
-    if args.json:
-        print(json.dumps(result, indent=2))
-        return 0 if result["supervisor"].get("running") else 1
-    supervisor = result["supervisor"]
-    if "error" in result:
-        print(f"{run_dir}: {result['error']}")
-        return 1
-    state = "running" if supervisor["running"] else f"not running ({supervisor.get('state')})"
-    print(f"supervisor pid {supervisor.get('pid')} {state}; run folder {run_dir}")
-    if result.get("network_error"):
-        print(f"network: {result['network_error']}")
-    print(f"{'name':<10} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
-          f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7}")
-    for name, child in result["children"].items():
-        alive = {True: "yes", False: "no", None: "?"}[child.get("alive")] if "alive" in child else "-"
-        stats = child.get("stats")
-        figures = (f"{stats['received']:>8} {stats['published']:>9} {stats['rejected']:>8} "
-                   f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f}") if stats else ""
-        pid = child["pid"] if child.get("running") else "-"
-        print(f"{name:<10} {pid!s:>7} {child['state']:<8} {child['restarts']:>8} "
-              f"{child.get('last_exit_text') or '-':<18} {alive:<5} {figures}")
-    return 0 if supervisor["running"] else 1
 
 
 def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
@@ -433,12 +407,6 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     stop = with_run_dir(commands.add_parser("stop", help="stop the supervisor and its children"))
     stop.add_argument("--timeout", type=float, default=40.0)
     stop.set_defaults(handler=command_stop)
-
-    status = with_run_dir(commands.add_parser("status", help="pids, restarts, liveliness and stats"))
-    status.add_argument("--json", action="store_true", help="machine-readable output")
-    status.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the network")
-    status.add_argument("--no-network", action="store_true", help="only the run folder, no Zenoh")
-    status.set_defaults(handler=command_status)
 
     supervise_command = with_run_dir(commands.add_parser(
         "supervise", help="(internal) run the supervisor of a run folder's launch.json"))

@@ -1,6 +1,6 @@
 """The demo: a simulated robot finds a tennis ball and drives up to it (the paper's basic run).
 
-    python -m deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS] [--secure DIR]
+    python -m balltrack.deploy.demo [--time-limit 60] [--run-dir runs/demo-YYYYmmdd-HHMMSS] [--secure DIR]
 
 Starts a router, the simulator (``chase`` scenario, real-time pacing), the detector, the
 locator and the follower as separate processes under the supervisor (``deploy/launcher.py``),
@@ -482,7 +482,7 @@ def print_summary(result: dict) -> None:
 
 
 def build_parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="python -m deploy.demo", description=__doc__,
+    parser = ArgumentParser(prog="python -m balltrack.deploy.demo", description=__doc__,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--time-limit", type=float, default=60.0, metavar="SECONDS",
                         help="give up after this many wall seconds of chase (default 60)")

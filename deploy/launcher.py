@@ -7,7 +7,7 @@
 
 Starts a router on a free local port (``port``, if nothing listens there) and the chosen
 services, each with its parameter file from ``config_dir`` and its ``key=value`` settings,
-under a background supervisor (``python -m deploy``'s, see ``deploy/supervisor.py``): one run
+under a background supervisor (``balltrack deploy``'s, see ``deploy/supervisor.py``): one run
 folder with ``launch.json``, every process's log and pid, ``status.json``. Each service
 declares its liveliness token before the next one starts (the simulator, last, meets a ready
 pipeline), and ``start_system`` returns once all of them are alive. A process that crashes is

@@ -2,7 +2,7 @@
 
 A run folder holds::
 
-    launch.json        what to run (written by ``python -m deploy start``): children in order
+    launch.json        what to run (written by ``balltrack deploy start``): children in order
     supervisor.pid     the supervisor's pid, while it runs
     supervisor.log     what the supervisor did: starts, exits, restarts, stop
     status.json        live state: per child pid, state, restarts, last exit status
@@ -406,7 +406,7 @@ def save_launch(run_dir: Path, specs: list[ChildSpec], info: dict) -> None:
 
 
 def supervise(run_dir: Path, settings: SupervisorSettings | None = None, log_file: bool = False) -> int:
-    """Run a run folder's launch.json until SIGINT/SIGTERM (``python -m deploy supervise``, whose
+    """Run a run folder's launch.json until SIGINT/SIGTERM (``python -m balltrack.deploy supervise``, whose
     stderr is supervisor.log, or ``start --foreground``, which logs to both with ``log_file``)."""
     log_format = "%(asctime)s %(name)s %(levelname)s %(message)s"
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format=log_format)

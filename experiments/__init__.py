@@ -1,4 +1,4 @@
 """Experiments: scripts that measure balltrack and print or plot the results.
 
-Each module runs as ``python -m experiments.<name>`` (and ``balltrack experiment <name>``).
+Each module runs as ``python -m balltrack.experiments.<name>`` (and ``balltrack experiment <name>``).
 """

@@ -4,7 +4,7 @@ if a folder is given, real photos resized to 640x480. Wall and CPU time per call
 
 Example::
 
-    python -m experiments.detector_speed --photos ../shared/data/real_tennis_dev
+    python -m balltrack.experiments.detector_speed --photos ../shared/data/real_tennis_dev
 """
 
 import argparse

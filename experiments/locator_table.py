@@ -10,9 +10,9 @@ resolution, to show what pixel quantisation alone costs. Errors are signed for t
 
 Example::
 
-    python -m experiments.locator_table
-    python -m experiments.locator_table --circle-model enclosing
-    python -m experiments.locator_table --detector-model enclosing   # locator assumes mean
+    python -m balltrack.experiments.locator_table
+    python -m balltrack.experiments.locator_table --circle-model enclosing
+    python -m balltrack.experiments.locator_table --detector-model enclosing   # locator assumes mean
 """
 
 import argparse

@@ -12,8 +12,8 @@ The folder holds images and a ``labels.json`` mapping each file name to a list o
 
 Example::
 
-    python -m experiments.real_photos /work/shared/data/real_tennis_dev
-    python -m experiments.real_photos /work/shared/data/real_tennis_dev --set param2=18
+    python -m balltrack.experiments.real_photos /work/shared/data/real_tennis_dev
+    python -m balltrack.experiments.real_photos /work/shared/data/real_tennis_dev --set param2=18
     balltrack experiment real_photos --photos /work/shared/data/real_tennis_dev --out runs/photos
 
 As an experiment (``run``) it reports recall and false positives per image with the detector's
@@ -137,7 +137,7 @@ def run(options) -> "ExperimentResult":
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.real_photos",
+    parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.real_photos",
                                      description="Score the ball detector on labelled photos.")
     parser.add_argument("folder", help="folder with images and labels.json")
     parser.add_argument("--config", help="detector TOML config file")

@@ -30,7 +30,7 @@ def session(router):
 
 @pytest.fixture
 def launch(router, session, log_dir):
-    """``launch(name, "key=value", ..., wait=True)`` starts ``python -m services.<name>`` with
+    """``launch(name, "key=value", ..., wait=True)`` starts ``python -m balltrack.services.<name>`` with
     those ``--set`` overrides against the test's router, waits for its liveliness token, and at
     teardown stops every launched service and checks it exited 0."""
     from tests.harness import Liveliness, start_service

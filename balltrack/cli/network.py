@@ -2,6 +2,7 @@
 
 import json
 import sys
+from pathlib import Path
 
 from balltrack.cli.session import networked, open_or_report
 from balltrack.common import keys as key_table
@@ -41,19 +42,52 @@ def command_router(args) -> int:
     return 0
 
 
+def _run_folder_status(args) -> int:
+    """The supervisor's view of a run folder: pids, restarts, last exits, with liveliness and stats."""
+    from balltrack.deploy.cli import collect_status
+
+    run_dir = Path(args.run_dir).resolve()
+    result = collect_status(run_dir, args.timeout, network=not args.no_network)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0 if result["supervisor"].get("running") else 1
+    supervisor = result["supervisor"]
+    if "error" in result:
+        print(f"{run_dir}: {result['error']}")
+        return 1
+    state = "running" if supervisor["running"] else f"not running ({supervisor.get('state')})"
+    print(f"supervisor pid {supervisor.get('pid')} {state}; run folder {run_dir}")
+    if result.get("network_error"):
+        print(f"network: {result['network_error']}")
+    print(f"{'name':<12} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
+          f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7}")
+    for name, child in result["children"].items():
+        alive = {True: "yes", False: "no", None: "?"}[child.get("alive")] if "alive" in child else "-"
+        stats = child.get("stats")
+        figures = (f"{stats['received']:>8} {stats['published']:>9} {stats['rejected']:>8} "
+                   f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f}") if stats else ""
+        pid = child["pid"] if child.get("running") else "-"
+        print(f"{name:<12} {pid!s:>7} {child['state']:<8} {child['restarts']:>8} "
+              f"{child.get('last_exit_text') or '-':<18} {alive:<5} {figures}")
+    return 0 if supervisor["running"] else 1
+
+
+
 def command_status(args) -> int:
+    if args.run_dir:
+        return _run_folder_status(args)
     session = open_or_report(args)
     if session is None:
         return 1
     alive, stats = service_status(session, args.namespace, args.timeout)
     session.close()
-    print(f"{'service':<10} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
+    print(f"{'service':<12} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
           f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7}")
     for service in key_table.SERVICES:
         row = stats.get(service)
         figures = (f"{row['received']:>9} {row['published']:>9} {row['rejected']:>8} "
                    f"{row['dropped']:>8} {row['p50_ms']:>7.2f} {row['p99_ms']:>7.2f}") if row else ""
-        print(f"{service:<10} {'yes' if service in alive else 'no':<6} {figures}")
+        print(f"{service:<12} {'yes' if service in alive else 'no':<6} {figures}")
     return 0
 
 
@@ -106,7 +140,12 @@ def register(commands) -> None:
                         "(default: the only host in DIR)")
     router.set_defaults(handler=command_router)
 
-    networked(commands, "status", "which services are alive, with their stats", command_status)
+    status = networked(commands, "status", "which services are alive, with their stats; with "
+                       "--run-dir also the supervisor's pids, restarts and last exits", command_status)
+    status.add_argument("--run-dir", metavar="DIR", help="a run folder of `balltrack deploy start` "
+                        "(e.g. runs/default)")
+    status.add_argument("--json", action="store_true", help="with --run-dir: machine-readable output")
+    status.add_argument("--no-network", action="store_true", help="with --run-dir: the folder only, no Zenoh")
     sim = networked(commands, "sim", "control the simulator: reset, set_light, place_ball, "
                     "place_robot", command_sim)
     sim.add_argument("op", choices=SIM_OPS)

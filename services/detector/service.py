@@ -8,7 +8,7 @@ ball, on frames with one), and, only while someone subscribes to them, ``image_o
 with the detections drawn) and ``image_tuning`` (the colour mask).
 
 Example:
-    python -m services.detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
+    balltrack run detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
 """
 
 from balltrack.common import keys

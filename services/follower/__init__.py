@@ -8,5 +8,5 @@ for ``rcv_timeout_secs``. The ROS2 ball_tracker ``follow_ball`` node, as a pure 
 
 Example::
 
-    python -m services.follower --connect tcp/127.0.0.1:7447 --set forward_chase_speed=0.15
+    balltrack run follower --connect tcp/127.0.0.1:7447 --set forward_chase_speed=0.15
 """

@@ -8,5 +8,5 @@ CameraInfo has been seen. The geometry is in :mod:`services.locator.geometry`.
 
 Example::
 
-    python -m services.locator --connect tcp/127.0.0.1:7447 --set ball_radius=0.033 --set mode=auto
+    balltrack run locator --connect tcp/127.0.0.1:7447 --set ball_radius=0.033 --set mode=auto
 """

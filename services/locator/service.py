@@ -5,7 +5,7 @@ at start). Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header
 the detection so end-to-end latency stays measurable).
 
 Example:
-    python -m services.locator --connect tcp/192.168.1.10:7447 --set ball_radius=0.033 --set mode=auto
+    balltrack run locator --connect tcp/192.168.1.10:7447 --set ball_radius=0.033 --set mode=auto
 """
 
 

@@ -6,5 +6,5 @@ distractors and a settable main light. The pure core is :mod:`services.simulator
 
 Example::
 
-    python -m services.simulator --set scenario=chase --set pacing=realtime
+    balltrack run simulator --set scenario=chase --set pacing=realtime
 """

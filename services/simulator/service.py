@@ -19,7 +19,7 @@ equals this stamp; step. Each wait gives up after ``lockstep_timeout`` wall seco
 so the same seed gives the same run.
 
 Example:
-    python -m services.simulator --set scenario=chase --set pacing=lockstep --set seed=3
+    balltrack run simulator --set scenario=chase --set pacing=lockstep --set seed=3
 """
 
 import collections

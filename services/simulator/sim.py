@@ -604,7 +604,7 @@ if __name__ == "__main__":
     from balltrack.common.config import load_config
 
     parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
-                                                 "python -m services.simulator.sim --frames 150")
+                                                 "python -m balltrack.services.simulator.sim --frames 150")
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--config", default=None)
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")

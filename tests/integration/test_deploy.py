@@ -1,4 +1,4 @@
-"""The supervisor and launcher (``python -m deploy``) and the subscriber example, as users run them.
+"""The supervisor and launcher (``balltrack deploy``) and the subscriber example, as users run them.
 
 Real processes on a free port in a temporary run folder; every wait is on a condition (a file's
 content, a liveliness token, a line of output) with a deadline.
@@ -23,6 +23,11 @@ SERVICES = ["detector", "locator", "follower"]
 def deploy(*arguments: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "balltrack.deploy", *arguments], cwd=REPO, env=process_environment(),
                           capture_output=True, text=True, timeout=timeout)
+
+
+def status_of(run_dir: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "balltrack", "status", "--run-dir", str(run_dir), "--json"],
+                          cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=60)
 
 
 def read_status(run_dir: Path) -> dict:
@@ -70,7 +75,7 @@ def started(tmp_path):
 
 def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
     run_dir, endpoint = started
-    result = deploy("status", "--run-dir", str(run_dir), "--json")
+    result = status_of(run_dir)
     assert result.returncode == 0, result.stdout + result.stderr
     status = json.loads(result.stdout)
     assert status["supervisor"]["running"]
@@ -97,7 +102,7 @@ def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
         session.close()
     assert "locator killed by SIGKILL" in (run_dir / "supervisor.log").read_text()
 
-    status = json.loads(deploy("status", "--run-dir", str(run_dir), "--json").stdout)
+    status = json.loads(status_of(run_dir).stdout)
     assert status["children"]["locator"]["alive"] and status["children"]["locator"]["restarts"] == 1
     pids = [child["pid"] for child in status["children"].values()] + [status["supervisor"]["pid"]]
 
@@ -114,8 +119,8 @@ def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
 
 
 def test_start_rejects_bad_options_and_a_bad_config(tmp_path):
-    result = deploy("start", "--services", "detector,camera", "--run-dir", str(tmp_path / "a"))
-    assert result.returncode == 2 and "unknown camera" in result.stderr
+    result = deploy("start", "--services", "detector,nosuch", "--run-dir", str(tmp_path / "a"))
+    assert result.returncode == 2 and "unknown nosuch" in result.stderr
     result = deploy("start", "--set", "max_size_thresh=0.3", "--run-dir", str(tmp_path / "b"))
     assert result.returncode == 2 and "SERVICE.KEY=VALUE" in result.stderr
     # A parameter the follower refuses: exit 2 is not restarted; start reports it and stops.

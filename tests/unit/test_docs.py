@@ -61,8 +61,9 @@ def test_every_key_and_message_is_documented():
 def test_quick_start_and_commands_are_documented():
     for text in ("./deploy/demo.sh", "./deploy/test.sh", "balltrack router", "balltrack detect",
                  "balltrack status", "balltrack echo", "balltrack hz", "balltrack config",
-                 "balltrack experiment", "python -m deploy start", "python -m deploy stop",
-                 "python -m deploy status", "examples/subscribe_ball3d.py", "--zenoh-config",
+                 "balltrack experiment", "balltrack deploy start", "balltrack deploy stop",
+                 "balltrack status --run-dir", "balltrack run detector", "balltrack topic list",
+                 "balltrack pub", "balltrack bw", "balltrack delay", "balltrack config dump", "examples/subscribe_ball3d.py", "--zenoh-config",
                  "deploy/zenoh/router-cluster.json5", "deploy/zenoh/client.json5"):
         assert text in README, f"{text} missing from README.md"
     for script in ("deploy/demo.sh", "deploy/test.sh", "deploy/setup.sh", ".ci/run"):
