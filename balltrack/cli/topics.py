@@ -107,6 +107,13 @@ class Window:
         return recent
 
 
+def spread(values: list[float], unit: str, digits: int) -> str:
+    """``mean 3.10 ms, min 2.00, max 4.00, std 0.50 (12 messages)``."""
+    return (f"mean {statistics.fmean(values):.{digits}f} {unit}, min {min(values):.{digits}f}, "
+            f"max {max(values):.{digits}f}, std {statistics.pstdev(values):.{digits}f} "
+            f"({len(values)} messages)")
+
+
 def _reporter(args, describe):
     """A ``report`` for _watch that prints ``describe(window items)`` and honours --count."""
     reports = [0]
@@ -127,8 +134,7 @@ def command_bw(args) -> int:
         sizes = [size for _, size in items]
         if not sizes:
             return f"{key}: no messages in {args.window:.1f} s"
-        return (f"{key}: {sum(sizes) / args.window / 1e3:.1f} kB/s, mean {statistics.fmean(sizes):.0f} B, "
-                f"min {min(sizes):.0f} B, max {max(sizes):.0f} B ({len(sizes)} messages)")
+        return f"{key}: {sum(sizes) / args.window / 1e3:.1f} kB/s, {spread(sizes, 'B', 0)}"
 
     report = _reporter(args, describe)
     return _watch(args, lambda sample, _out: window.add(len(sample.payload)),
@@ -168,8 +174,7 @@ def command_delay(args) -> int:
         delays = [delay for _, delay in items]
         if not delays:
             return f"{key}: no stamped messages in {args.window:.1f} s"
-        return (f"{key}: delay mean {statistics.fmean(delays):.2f} ms, min {min(delays):.2f}, "
-                f"max {max(delays):.2f}, std {statistics.pstdev(delays):.2f} ({len(delays)} messages)")
+        return f"{key}: delay {spread(delays, 'ms', 2)}"
 
     report = _reporter(args, describe)
 
