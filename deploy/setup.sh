@@ -2,7 +2,8 @@
 # Set up balltrack on this machine; safe to run again (quiet when everything is there).
 #
 #   1. the Debian packages MuJoCo's EGL renderer needs (libegl1 libgl1 libegl-mesa0
-#      libgl1-mesa-dri) and iproute2 (network namespaces for the multi-host tests), installed
+#      libgl1-mesa-dri), iproute2 (network namespaces for the multi-host tests) and chromium
+#      (headless, the Rerun viewer's screenshot test), installed
 #      with apt-get only when missing (sudo when not root);
 #   2. a virtual environment .venv at the repository root (Python >= 3.11);
 #   3. pip install -e '.[test]' into it, again only when pyproject.toml changed since the last
@@ -22,7 +23,8 @@ as_root() {
 
 # -- 1. system packages --------------------------------------------------------------------
 # iproute2: the multi-host tests make network namespaces with `ip netns`.
-PACKAGES=(libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri iproute2)
+# chromium: the Rerun viewer's test opens its web page headless and takes a screenshot.
+PACKAGES=(libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri iproute2 chromium)
 if command -v dpkg >/dev/null 2>&1; then
     missing=()
     for package in "${PACKAGES[@]}"; do

@@ -25,6 +25,7 @@ import sys
 from balltrack.cli import (calibrate, config, introspect, network, offline, output, publish, recording, run,
                            topics)
 from balltrack.cli import secure
+from balltrack.cli import view
 from balltrack.common.keys import Keys
 from balltrack.common.session import ArgumentParser
 
@@ -60,6 +61,7 @@ def build_parser() -> ArgumentParser:
     calibrate.register(commands)
     recording.register(commands)
     secure.register(commands)
+    view.register(commands)
     for name, (help_text, _) in DELEGATED.items():
         commands.add_parser(name, help=help_text, add_help=False)
     return parser

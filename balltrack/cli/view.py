@@ -1,0 +1,102 @@
+"""Watching the system live:
+
+    balltrack view [--port 9090]              # Rerun's web viewer at http://HOST:PORT
+    balltrack view --foxglove [--port 8765]   # a Foxglove WebSocket server (ws://HOST:PORT)
+
+Rerun shows the annotated frame, the true balls and the robot's path in the world frame, and
+time plots of cmd_vel and of the located-ball rate (its data over gRPC on --grpc-port).
+Foxglove (app or https://app.foxglove.dev) opens ws://localhost:8765 and shows /image (the
+detector's annotated frame), /scene (located and true balls), /tf (world -> base_link) and
+/cmd_vel. Stops within a fraction of a second on SIGINT or SIGTERM.
+"""
+
+import sys
+
+from balltrack.cli.session import networked, open_or_report
+from balltrack.common.shutdown import stop_on_signals
+
+
+def _fail(args, reason: str, status: int) -> int:
+    print(f"balltrack {args.command}: {reason}", file=sys.stderr)
+    return status
+
+
+def _serve_rerun(args, session, stop) -> int:
+    import rerun as rr
+
+    from balltrack.deploy.view import RerunBridge
+
+    recording = rr.RecordingStream("balltrack")
+    try:
+        server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit)
+        rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=server)
+    except Exception as error:  # the port taken, an address not ours
+        return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
+                           f"{str(error).strip().splitlines()[0]}", 1)
+    bridge = RerunBridge(session, recording, args.namespace)
+    print(f"balltrack view: Rerun viewer on http://127.0.0.1:{args.port} (data: {server}; Ctrl-C to stop)",
+          file=sys.stderr, flush=True)
+    stop.wait()
+    bridge.close()
+    recording.disconnect()
+    return _report(bridge)
+
+
+def _serve_foxglove(args, session, stop) -> int:
+    import foxglove
+
+    from balltrack.deploy.view import FoxgloveBridge
+
+    try:
+        server = foxglove.start_server(host=args.host, port=args.port, name="balltrack")
+    except Exception as error:  # the port taken, an address not ours
+        return _fail(args, f"cannot serve on {args.host}:{args.port}: {str(error).strip()}", 1)
+    bridge = FoxgloveBridge(session, args.namespace)
+    print(f"balltrack view: Foxglove server on ws://{args.host}:{server.port} (Ctrl-C to stop)",
+          file=sys.stderr, flush=True)
+    stop.wait()
+    bridge.close()
+    server.stop()
+    return _report(bridge)
+
+
+def _report(bridge) -> int:
+    if bridge.rejected:
+        print(f"balltrack view: {bridge.rejected} malformed message(s) dropped", file=sys.stderr)
+    return 0
+
+
+def command_view(args) -> int:
+    if args.port is None:
+        args.port = 8765 if args.foxglove else 9090
+    for option, port in (("--port", args.port), ("--grpc-port", args.grpc_port)):
+        if not 0 <= port <= 65535 or (port == 0 and not args.foxglove):
+            return _fail(args, f"{option}: {port} is not a TCP port (1-65535; 0, any free one, "
+                               "only with --foxglove)", 2)
+    try:
+        import foxglove  # noqa: F401  (both viewers' bridges live in deploy/view.py)
+        import rerun  # noqa: F401
+    except ImportError as error:
+        return _fail(args, f"{error.name} is not installed (pip install 'balltrack[view]')", 1)
+    stop = stop_on_signals()
+    session = open_or_report(args)
+    if session is None:
+        return 1
+    try:
+        return (_serve_foxglove if args.foxglove else _serve_rerun)(args, session, stop)
+    finally:
+        session.close()
+
+
+def register(commands) -> None:
+    sub = networked(commands, "view", "watch the system live in Rerun or Foxglove", command_view)
+    sub.add_argument("--foxglove", action="store_true",
+                     help="serve the Foxglove WebSocket protocol (open it in the Foxglove app)")
+    sub.add_argument("--host", default="127.0.0.1",
+                     help="Foxglove: the address to serve on (default 127.0.0.1; 0.0.0.0 for other hosts)")
+    sub.add_argument("--port", type=int, default=None,
+                     help="port to serve on (Rerun's web page: default 9090; Foxglove: 8765, 0 = any)")
+    sub.add_argument("--grpc-port", type=int, default=9876,
+                     help="Rerun: the port its viewer reads the data from (default 9876)")
+    sub.add_argument("--memory-limit", default="256MiB",
+                     help="Rerun: data kept for viewers that connect later (default 256MiB)")
