@@ -27,7 +27,7 @@ from balltrack.common.session import ArgumentParser
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
-               "distractors", "real_photos", "fuzz")
+               "distractors", "real_photos", "fuzz", "soak")
 TRANSPORTS = ("auto", "in-process", "zenoh")
 
 
@@ -53,6 +53,8 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--follower", action="append", default=[], metavar="KEY=VALUE",
                         help="change a follower parameter for the closed-loop experiments "
                              "(repeatable; overrides the experiment's own settings)")
+    parser.add_argument("--minutes", type=int, default=None, metavar="N",
+                        help="soak: minutes to run (default 30, --quick 2)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     return parser
 
@@ -62,6 +64,8 @@ def parse(argv: list[str]) -> Options:
     args = parser.parse_args(argv)
     if args.name not in EXPERIMENTS and args.name != "all":
         parser.error(f"unknown experiment {args.name!r} (choose from {', '.join(EXPERIMENTS)}, all)")
+    if args.minutes is not None and args.minutes < 1:
+        parser.error(f"--minutes: must be >= 1, got {args.minutes}")
     if args.frames is not None and args.frames < 1:
         parser.error(f"--frames: must be >= 1, got {args.frames}")
     out = Path(args.out)
@@ -83,6 +87,7 @@ def parse(argv: list[str]) -> Options:
     except ValueError as error:  # ConfigError: unknown key or bad value
         parser.error(str(error))
     options.name = args.name  # type: ignore[attr-defined]
+    options.minutes = args.minutes  # type: ignore[attr-defined]
     return options
 
 
