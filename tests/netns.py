@@ -164,6 +164,15 @@ class NetworkNamespaces:
             raise NetnsError(f"free port on {host}: {result.stderr.strip()}")
         return int(result.stdout.strip())
 
+    def cut(self, host: str) -> None:
+        """Unplug ``host`` from the switch: its port goes down, so nothing reaches it or leaves
+        it (no RST, no FIN: as a pulled cable or a dead Wi-Fi link) until :meth:`heal`."""
+        _ip("-n", self.switch, "link", "set", f"port-{host}", "down")
+
+    def heal(self, host: str) -> None:
+        """Plug ``host`` back in; connections that were cut carry on or reconnect."""
+        _ip("-n", self.switch, "link", "set", f"port-{host}", "up")
+
     def pids(self) -> list[int]:
         """Processes still running inside any of these namespaces."""
         found: list[int] = []
