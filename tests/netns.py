@@ -5,6 +5,7 @@
         network.address("a")                  # "10.213.0.1"
         network.command("b", [python, "-m", "balltrack.services.locator", ...])  # argv for Popen
         port = network.free_port("a")
+        network.cut("c"); ...; network.heal("c")   # unplug c from the switch, plug it back
 
 The layout is a switch: a fourth namespace ``<base>-net`` holds a Linux bridge, and each host
 namespace ``<base>-<host>`` has one veth (``eth0``) plugged into it, an address in one /24 and
