@@ -50,9 +50,10 @@ class ColourMetrics:
     colourfulness: float  # mean chroma of its mask pixels over the frame's reference level
     mean_hue: float       # OpenCV hue (0-180) of the mean colour of the whole disc; -1: grey
     mean_chroma: float    # chroma (raw units, max - min channel) of that mean colour
+    colour_hue: float     # hue of the mean colour of its mask pixels only; -1: grey
 
 
-NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0)
+NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0, colour_hue=-1.0)
 
 
 @dataclass(frozen=True)
@@ -182,12 +183,14 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
     mean_bgr = cv2.mean(planes.frame[box], inside)[:3]
     return ColourMetrics(colourfulness=cv2.mean(planes.chroma[box], selected)[0] / planes.reference,
                          mean_hue=mean_hue(mean_bgr),
-                         mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain)
+                         mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain,
+                         colour_hue=mean_hue(cv2.mean(planes.frame[box], selected)[:3]))
 
 
-def hue_in_range(hue: float, config: DetectorConfig) -> bool:
-    """Whether a hue is within the configured range (half a unit of slack; wraps through 0)."""
-    low, high = config.h_min - 0.5, config.h_max + 0.5
+def hue_in_range(hue: float, config: DetectorConfig, margin: float = -0.5) -> bool:
+    """Whether a hue is within the configured range, at least ``margin`` inside it (the default:
+    half a unit of slack; wraps through 0)."""
+    low, high = config.h_min + margin, config.h_max - margin
     if low <= high:
         return low <= hue <= high
     return hue >= low or hue <= high
@@ -212,6 +215,9 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
             or colour.colourfulness < config.min_colourfulness):
         return None
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
+        return None
+    # (the mask pixels' mean: a two-colour ball's other half does not count)
+    if config.hue_margin > 0 and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5):
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
     # circle in places (a box face); a ball's edge is even, its neighbours add no spread.

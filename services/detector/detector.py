@@ -51,14 +51,17 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
-from balltrack.services.detector.proposals import (FrameSearch, blob_proposals, frame_search,
-                                                   hough_proposals, leftover_blobs, mask_blobs)
+from balltrack.services.detector.proposals import (FrameSearch, blob_proposals, fill_holes,
+                                                   frame_search, hough_proposals, leftover_blobs)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
 # with no ambient: its dark side is found by the outline search, or it is dropped).
 LIT_CAP_SHARE = 0.6
 # Rounds of accepting balls and looking again around them.
 MAX_ROUNDS = 3
+# A ball holds no other ball: a circle mostly (half its area) inside a passing one of at least
+# this many times its radius is part of it (a patch between a logo's letters, a piece of rim).
+CONTAINED_RATIO = 3.0
 
 Measured = tuple[Candidate, CandidateMetrics]
 
@@ -122,20 +125,20 @@ class BallDetector:
 
     # ------------------------------------------------------------------------- candidates
     def _find_candidates(self, planes: ColourPlanes, scale: float) -> list[Candidate]:
-        contours = mask_blobs(planes.mask)
+        contours, shape_mask = fill_holes(planes.mask)
         if not contours:
             return []
-        search = frame_search(planes, self.config, scale)
+        search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
-            found = self._blob_candidates(contour, search, planes.mask)
+            found = self._blob_candidates(contour, search, shape_mask)
             if found is None:
                 continue
             measured.extend(found)
             if any(metrics.clean for _, metrics in found):
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
-            measured.extend(self._measure_proposals(proposals, search, planes.mask))
+            measured.extend(self._measure_proposals(proposals, search, shape_mask))
         return self._accept(measured, search)
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
@@ -183,9 +186,9 @@ class BallDetector:
         config = self.config
         for candidate, metrics in measured:
             candidate.score = judge(metrics, config) or 0.0
-        pending = sorted(measured, key=lambda item: item[0].score, reverse=True)
+        pending = sorted(without_contained(measured), key=lambda item: item[0].score, reverse=True)
         accepted: list[Candidate] = []
-        explained = search.planes.mask
+        explained = search.mask
         still: list[Measured] = []
         for _round in range(MAX_ROUNDS):
             newly: list[Candidate] = []
@@ -255,3 +258,14 @@ class BallDetector:
                     candidate.score = judge(metrics, self.config) or 0.0
                 results.extend(found)
         return results
+
+
+def without_contained(measured: list[Measured]) -> list[Measured]:
+    """``measured`` without the circles that lie mostly inside a passing (scored) candidate of
+    at least CONTAINED_RATIO times their radius: pieces of one ball's mask (between a logo's
+    letters, cut off its rim by a seam) would otherwise outscore and, by overlap, suppress the
+    whole ball."""
+    passing = [candidate for candidate, _ in measured if candidate.score > 0]
+    return [(candidate, metrics) for candidate, metrics in measured
+            if not any(outer.radius >= CONTAINED_RATIO * candidate.radius
+                       and circle_overlap(candidate, outer) >= 0.5 for outer in passing)]

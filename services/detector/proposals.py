@@ -1,6 +1,8 @@
 """Proposals: step 5 of the detector (see ``detector.py``), circles that may be balls.
 
-Per mask blob: its enclosing circle, and unless that circle is already a clean isolated ball,
+The shape of each blob is judged with its small holes filled (``fill_holes``): a logo, a seam
+or a blown-out highlight is not the ball's colour but is still the ball. Per mask blob: its
+enclosing circle, and unless that circle is already a clean isolated ball,
 the Hough circle transform (cv2.HoughCircles with ``dp min_dist param1 param2``, radii in
 ``min_radius..max_radius``) inside the blob's box, which splits touching balls and finds balls
 joined to other yellow-green things. Proposals are refined (``fit.py``) and checked
@@ -20,6 +22,9 @@ from balltrack.services.detector.mask import ColourPlanes
 # Hough circles per mask blob: beyond the strongest few they are duplicates or clutter.
 HOUGH_CIRCLES_PER_BLOB = 4
 HOUGH_CIRCLES_SCANNED = 40
+# A hole of a blob is filled when it is at most this share of the blob's outline area: a
+# ball's logo or highlight is a fraction of it, the opening of a ring is most of it.
+HOLE_SHARE = 0.5
 _BOUNDARY_KERNEL = np.ones((3, 3), np.uint8)
 
 
@@ -27,7 +32,8 @@ _BOUNDARY_KERNEL = np.ones((3, 3), np.uint8)
 class FrameSearch:
     """What the candidate search of one frame shares (all at processing size)."""
 
-    planes: ColourPlanes
+    planes: ColourPlanes    # colour planes (their mask: the colour alone, for colour statistics)
+    mask: np.ndarray        # the colour mask with its blobs' small holes filled, for shapes
     boundary_x: np.ndarray  # mask boundary pixels (frame border excluded), in row order
     boundary_y: np.ndarray
     min_radius: float
@@ -36,10 +42,21 @@ class FrameSearch:
     scale: float            # processing size / input size
 
 
-def mask_blobs(mask: np.ndarray) -> list[np.ndarray]:
-    """Outer contours of the colour mask's blobs."""
-    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    return list(contours)
+def fill_holes(mask: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Outer contours of the mask's blobs, and the mask with each hole filled that is at most
+    HOLE_SHARE of its blob's outline area (``mask`` itself when there is none)."""
+    contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+    if not contours:
+        return [], mask
+    links = hierarchy[0]  # per contour: next, previous, first child, parent
+    outer = [contour for contour, link in zip(contours, links) if link[3] < 0]
+    holes = [contour for contour, link in zip(contours, links)
+             if link[3] >= 0 and cv2.contourArea(contour) <= HOLE_SHARE * cv2.contourArea(contours[link[3]])]
+    if not holes:
+        return outer, mask
+    filled = mask.copy()
+    cv2.drawContours(filled, holes, -1, 255, cv2.FILLED)
+    return outer, filled
 
 
 def boundary_points(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,13 +70,16 @@ def boundary_points(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points[:, 0].copy(), points[:, 1].copy()
 
 
-def frame_search(planes: ColourPlanes, config: DetectorConfig, scale: float) -> FrameSearch:
-    """The search of one frame: its boundary pixels and the radius limits at processing size."""
-    height, width = planes.mask.shape
+def frame_search(planes: ColourPlanes, config: DetectorConfig, scale: float,
+                 mask: np.ndarray | None = None) -> FrameSearch:
+    """The search of one frame: its boundary pixels and the radius limits at processing size.
+    ``mask``: the shape mask (default the colour mask)."""
+    mask = planes.mask if mask is None else mask
+    height, width = mask.shape
     min_radius = max(1.0, config.min_radius * scale)
     max_radius = (config.max_radius * scale) if config.max_radius else min(width, height) / 2.0
-    boundary_x, boundary_y = boundary_points(planes.mask)
-    return FrameSearch(planes, boundary_x, boundary_y, min_radius, max_radius,
+    boundary_x, boundary_y = boundary_points(mask)
+    return FrameSearch(planes, mask, boundary_x, boundary_y, min_radius, max_radius,
                        max(1.0, config.small_radius * scale), scale)
 
 
@@ -96,7 +116,7 @@ def hough_proposals(box: tuple[int, int, int, int], search: FrameSearch,
     """Hough circles inside one blob's box (left, top, width, height): they split touching
     balls and find balls joined to other yellow-green things. Each blob gets its own few
     strongest circles."""
-    mask = search.planes.mask
+    mask = search.mask
     height, width = mask.shape
     left, top, blob_width, blob_height = box
     extent = max(blob_width, blob_height)

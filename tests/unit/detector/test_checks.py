@@ -17,7 +17,7 @@ from tests.unit.detector.drawing import TENNIS_BGR, scene
 
 SHAPE = (240, 320)
 GOOD_MASK = MaskMetrics(visible=1.0, support=0.95, leak=0.02, fill=0.97, outside=0.01, spread=0.02)
-GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0)
+GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0, colour_hue=36.0)
 
 
 def test_a_clean_disc_measures_as_a_ball():
@@ -96,6 +96,7 @@ def test_colour_stats_of_a_ball_and_of_no_colour():
     colour = colour_stats(Candidate(160.0, 120.0, 25.0), planes)
     assert colour.colourfulness > DetectorConfig().min_colourfulness
     assert abs(colour.mean_hue - mean_hue(TENNIS_BGR)) < 3.0
+    assert abs(colour.colour_hue - mean_hue(TENNIS_BGR)) < 3.0
     assert colour.mean_chroma > 100
     assert colour_stats(Candidate(40.0, 40.0, 15.0), planes) == NO_COLOUR  # no mask there
     assert colour_stats(Candidate(-100.0, -100.0, 10.0), planes) == NO_COLOUR  # off the frame
@@ -116,6 +117,8 @@ def test_judge_scores_a_ball():
     ({"outside": 0.35}, {}, 3.0),                      # in a large area of colour
     ({}, {"colourfulness": 0.2}, 3.0),                 # dull
     ({}, {"mean_chroma": 3.0, "mean_hue": 15.0}, 3.0),  # dim, and the mean colour is orange
+    ({}, {"colour_hue": 26.0}, 3.0),                   # its colour at the orange end (wood, skin)
+    ({}, {"colour_hue": 48.5}, 3.0),                   # or at the green end (leaves)
     ({"spread": 0.1, "leak": 0.1, "support": 0.99}, {}, 3.0),  # corners
     ({"fill": 0.56, "support": 0.46}, {}, 3.0),        # each check passed, but below min_score
 ])
@@ -133,5 +136,11 @@ def test_judge_accepts_what_the_rejections_border_on():
     # an uneven edge without leaks (a touching neighbour) is not a corner
     uneven = CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.1), GOOD_COLOUR, size=3.0)
     assert judge(uneven, config) is not None
+    # a two-colour ball: the mean of the whole disc is orange, its colour part is the target's
+    two_colour = CandidateMetrics(GOOD_MASK, dataclasses.replace(GOOD_COLOUR, mean_hue=22.0), size=3.0)
+    assert judge(two_colour, config) is not None
+    # the colour's hue just inside the margin
+    edge = dataclasses.replace(GOOD_COLOUR, colour_hue=config.h_min + config.hue_margin)
+    assert judge(CandidateMetrics(GOOD_MASK, edge, size=3.0), config) is not None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None

@@ -21,7 +21,9 @@ from balltrack.common.config import ConfigError, load_config
 from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector, Detection, DetectionResult
+from balltrack.services.detector.detector import (BallDetector, Detection, DetectionResult,
+                                                  without_contained)
+from balltrack.services.detector.geometry import Candidate
 from tests import harness
 from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_lit_from_above, floor,
                                          pitch_dark_frame, scene, to_uint8)
@@ -227,6 +229,29 @@ def test_touching_balls_keep_their_outlines(detector):
     assert len(result.detections) == 2, result.detections
     assert_found(result.detections[:1], *first)
     assert_found(result.detections[1:], *second)
+
+
+def test_a_ball_is_not_suppressed_by_a_piece_of_itself():
+    ball = Candidate(200.0, 200.0, 60.0, score=0.7)
+    patch = Candidate(215.0, 190.0, 6.0, score=0.9)      # between a logo's letters
+    on_rim = Candidate(200.0, 257.0, 5.0, score=0.8)     # cut off the rim by a seam
+    neighbour = Candidate(200.0, 200.0, 25.0, score=0.9)  # ball-sized: judged on its own
+    outside = Candidate(320.0, 200.0, 6.0, score=0.9)
+    kept = [candidate for candidate, _ in without_contained(
+        [(ball, None), (patch, None), (on_rim, None), (neighbour, None), (outside, None)])]
+    assert kept == [ball, neighbour, outside]
+    # a circle that failed its checks suppresses nothing
+    failed = dataclasses.replace(ball, score=0.0)
+    assert len(without_contained([(failed, None), (patch, None)])) == 2
+
+
+def test_a_ball_with_a_logo_and_a_highlight(detector):
+    image = harness.draw_ball(to_uint8(floor()), 320.4, 240.6, 70.0)
+    cv2.putText(image, "Penn 1", (265, 250), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (20, 20, 20), 3)
+    cv2.circle(image, (300, 215), 14, (250, 250, 250), -1)
+    result = detector.detect(image)
+    assert len(result.detections) == 1, result.detections
+    assert_found(result.detections, 320.4, 240.6, 70.0, centre_tolerance=2.0, radius_tolerance=0.05)
 
 
 # ------------------------------------------------------------------------ distractors

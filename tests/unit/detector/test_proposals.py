@@ -11,7 +11,7 @@ from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 from balltrack.services.detector.proposals import (HOUGH_CIRCLES_PER_BLOB, blob_proposals,
                                                    boundary_points, frame_search, hough_proposals,
-                                                   leftover_blobs, mask_blobs)
+                                                   fill_holes, leftover_blobs)
 
 SHAPE = (240, 320)
 
@@ -27,12 +27,24 @@ def search_of(mask, config=None, chroma_level=180):
     return frame_search(planes_of(mask, chroma_level), config or DetectorConfig(), 1.0)
 
 
-def test_mask_blobs_one_contour_per_blob():
+def test_fill_holes_one_contour_per_blob():
     mask = disc(SHAPE, 60.0, 60.0, 15.0) | disc(SHAPE, 200.0, 120.0, 25.0)
-    blobs = mask_blobs(mask)
+    blobs, filled = fill_holes(mask)
     assert len(blobs) == 2
     assert sorted(cv2.boundingRect(blob)[2] for blob in blobs) == pytest.approx([31, 51], abs=2)
-    assert mask_blobs(np.zeros(SHAPE, np.uint8)) == []
+    assert filled is mask  # no holes: nothing to fill
+    assert fill_holes(np.zeros(SHAPE, np.uint8))[0] == []
+
+
+def test_fill_holes_fills_a_logo_but_not_a_ring():
+    # a ball with a dark logo and a highlight inside it: one blob, filled
+    ball = disc(SHAPE, 80.0, 120.0, 40.0) & ~disc(SHAPE, 70.0, 110.0, 12.0) & ~disc(SHAPE, 95.0, 130.0, 8.0)
+    # a ring (a tape roll): its opening is most of it
+    ring = disc(SHAPE, 240.0, 120.0, 40.0) & ~disc(SHAPE, 240.0, 120.0, 32.0)
+    blobs, filled = fill_holes(ball | ring)
+    assert len(blobs) == 2
+    assert np.array_equal(filled[:, :160], disc(SHAPE, 80.0, 120.0, 40.0)[:, :160])
+    assert np.array_equal(filled[:, 160:], ring[:, 160:])
 
 
 def test_boundary_points_lie_on_the_rim_in_row_order_without_the_frame_border():
@@ -61,7 +73,7 @@ def test_frame_search_radius_limits():
 def test_a_round_blob_proposes_its_enclosing_circle():
     x, y, radius = 160.4, 120.3, 22.0
     mask = disc(SHAPE, x, y, radius)
-    [blob] = mask_blobs(mask)
+    [blob] = fill_holes(mask)[0]
     [proposal] = blob_proposals(blob, search_of(mask), mask, DetectorConfig())
     assert math.hypot(proposal.x - x, proposal.y - y) < 1.0
     assert abs(proposal.radius - radius) < 1.5
@@ -70,28 +82,28 @@ def test_a_round_blob_proposes_its_enclosing_circle():
 def test_elongated_blobs_propose_nothing_but_are_kept_for_hough():
     mask = np.zeros(SHAPE, np.uint8)
     mask[100:112, 40:240] = 255  # a bar
-    [blob] = mask_blobs(mask)
+    [blob] = fill_holes(mask)[0]
     assert blob_proposals(blob, search_of(mask), mask, DetectorConfig()) == []
 
 
 def test_blobs_that_cannot_hold_a_ball_are_dropped():
     config = DetectorConfig()
     tiny = disc(SHAPE, 100.0, 100.0, 1.2)
-    assert blob_proposals(mask_blobs(tiny)[0], search_of(tiny), tiny, config) is None
+    assert blob_proposals(fill_holes(tiny)[0][0], search_of(tiny), tiny, config) is None
     huge = np.full(SHAPE, 255, np.uint8)
     huge[0, :] = 0
     small_limit = search_of(huge, DetectorConfig(max_radius=20))
-    assert blob_proposals(mask_blobs(huge)[0], small_limit, huge, config) is None
+    assert blob_proposals(fill_holes(huge)[0][0], small_limit, huge, config) is None
     # a dull blob (leaves in shade): its mean chroma is below 0.7 min_colourfulness
     dull = disc(SHAPE, 100.0, 100.0, 20.0)
     dull_search = search_of(dull, chroma_level=int(0.6 * config.min_colourfulness * 250))
-    assert blob_proposals(mask_blobs(dull)[0], dull_search, dull, config) is None
+    assert blob_proposals(fill_holes(dull)[0][0], dull_search, dull, config) is None
 
 
 def test_hough_splits_touching_balls():
     first, second = (120.0, 120.0, 28.0), (120.0 + 28.0 + 20.0, 125.0, 20.0)
     mask = disc(SHAPE, *first) | disc(SHAPE, *second)
-    [blob] = mask_blobs(mask)
+    [blob] = fill_holes(mask)[0]
     proposals = hough_proposals(cv2.boundingRect(blob), search_of(mask), DetectorConfig())
     assert 2 <= len(proposals) <= HOUGH_CIRCLES_PER_BLOB
     for x, y, radius in (first, second):
