@@ -14,7 +14,7 @@ Examples::
 
     balltrack experiment all --quick --out runs/quick
     balltrack experiment illumination --frames 3 --out /tmp/illumination
-    balltrack experiment real_photos --photos /work/shared/data/real_tennis_dev --out runs/photos
+    balltrack experiment real_photos --photos /work/shared/data --out runs/photos
     balltrack experiment tracking --transport in-process --out runs/tracking
 """
 
@@ -25,6 +25,8 @@ from pathlib import Path
 
 from balltrack.common.session import ArgumentParser
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
+from balltrack.experiments.detector_speed import DEFAULT_PHOTOS
+from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
                "distractors", "real_photos", "fuzz", "soak")
@@ -44,7 +46,9 @@ def build_parser() -> ArgumentParser:
                         help="frames (tracking: runs) per condition, overriding the budget")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--photos", default=None, metavar="DIR",
-                        help="labelled photo folder for real_photos (images + labels.json)")
+                        help="labelled photos for real_photos: a set (images + labels.json) or a "
+                             "folder of sets (every subfolder with labels.json); `all` uses "
+                             "/work/shared/data when it exists")
     parser.add_argument("--transport", choices=TRANSPORTS, default="auto",
                         help="tracking: Zenoh services in lockstep (zenoh), the in-process loop, "
                              "or zenoh when the simulator service works (auto, default)")
@@ -74,10 +78,12 @@ def parse(argv: list[str]) -> Options:
     photos = None
     if args.photos is not None:
         photos = Path(args.photos)
-        if not (photos / "labels.json").is_file():
-            parser.error(f"--photos: {photos} has no labels.json (expected images + labels.json)")
+        if not photo_sets(photos):
+            parser.error(f"--photos: {photos} has no labels.json, nor any subfolder with one")
     elif args.name == "real_photos":
-        parser.error("real_photos needs --photos DIR (a folder of images with labels.json)")
+        parser.error("real_photos needs --photos DIR (a labelled set, or a folder of them)")
+    elif args.name == "all" and photo_sets(DEFAULT_PHOTOS):
+        photos = DEFAULT_PHOTOS
     options = Options(out=out, quick=args.quick, frames=args.frames, seed=args.seed,
                       photos=photos, transport=args.transport, progress=not args.no_progress,
                       detector_overrides=args.detector, follower_overrides=args.follower)
