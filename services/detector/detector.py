@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import (CandidateMetrics, colour_stats, judge,
+from balltrack.services.detector.checks import (NO_COLOUR, CandidateMetrics, colour_stats, judge,
                                                 measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
@@ -51,12 +51,20 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
-from balltrack.services.detector.proposals import (FrameSearch, blob_proposals, fill_holes,
-                                                   frame_search, hough_proposals, leftover_blobs)
+from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_proposals,
+                                                   fill_holes, frame_search, hough_proposals,
+                                                   inscribed_discs, leftover_blobs)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
 # with no ambient: its dark side is found by the outline search, or it is dropped).
 LIT_CAP_SHARE = 0.6
+# A member of a cluster of touching balls (see _cluster_candidates) is a circle of enough pixels
+# (CLUSTER_MIN_SIZE times small_radius) to be told from a lobe of a blob; its fitted circle is
+# nearly all colour (CLUSTER_FILL: one ball of the heap) and its own edge is even
+# (CLUSTER_SPREAD: a ball's is at most ~0.09 of its radius on real photos).
+CLUSTER_MIN_SIZE = 1.5
+CLUSTER_FILL = 0.9
+CLUSTER_SPREAD = 0.09
 # Rounds of accepting balls and looking again around them.
 MAX_ROUNDS = 3
 # A ball holds no other ball: a circle mostly (half its area) inside a passing one of at least
@@ -138,7 +146,9 @@ class BallDetector:
             if any(metrics.clean for _, metrics in found):
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
-            measured.extend(self._measure_proposals(proposals, search, shape_mask))
+            in_blob = self._measure_proposals(proposals, search, shape_mask)
+            measured.extend(in_blob)
+            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob))
         return self._accept(measured, search)
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
@@ -173,6 +183,66 @@ class BallDetector:
             metrics = CandidateMetrics(mask=on_mask, colour=colour_stats(candidate, search.planes),
                                        size=candidate.radius / search.small_radius)
             results.append((candidate, metrics))
+        return results
+
+    def _cluster_candidates(self, contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
+                            proposed: list[Measured]) -> list[Measured]:
+        """The balls of a cluster of touching balls, each measured as if the others were
+        already found (its rim towards them is neither edge nor leak); [] unless the blob is
+        such a cluster.
+
+        Members are circles nearly all colour, evenly edged and large enough (CLUSTER_*), not
+        overlapping: the blob's measured proposals, most rim support first, then the
+        inscribed discs of what they leave of it (proposals.inscribed_discs); together they
+        must cover most of the blob (proposals.CLUSTER_COVER).
+        """
+        # (the spread is judged once the other members are explained: rays into them meet
+        # their far edges)
+        def member_like(candidate: Candidate, metrics: CandidateMetrics) -> bool:
+            return (candidate.radius >= CLUSTER_MIN_SIZE * search.small_radius
+                    and metrics.mask.fill >= CLUSTER_FILL)
+
+        def completed(members: list[Candidate]) -> list[Candidate]:
+            """``members`` and the inscribed discs of what they leave of the blob."""
+            members = list(members)
+            for proposal in inscribed_discs(contour, search, members):
+                fitted = refine_on_boundary(proposal, search.boundary_x, search.boundary_y)
+                # (the fit may slide onto a neighbour's outer rim: then the inscribed disc stays)
+                if fitted is None or math.hypot(fitted.x - proposal.x, fitted.y - proposal.y) > 0.5 * proposal.radius:
+                    fitted = proposal
+                on_mask = measure_mask(fitted, mask)
+                if (on_mask is not None and member_like(fitted, CandidateMetrics(on_mask, NO_COLOUR, 0.0))
+                        and all(circle_overlap(fitted, other) < 0.3 for other in members)):
+                    members.append(fitted)
+            return members
+
+        from_proposals: list[Candidate] = []
+        for candidate, metrics in sorted(proposed, key=lambda item: item[1].mask.support, reverse=True):
+            if member_like(candidate, metrics) and all(circle_overlap(candidate, other) < 0.3
+                                                       for other in from_proposals):
+                from_proposals.append(candidate)
+        # Two readings of the blob: the proposals' circles completed by inscribed discs (Hough
+        # splits a heap whose gaps the mask's closing filled), or inscribed discs alone; the
+        # one that explains more of it.
+        readings = [completed(from_proposals), completed([])]
+        covers = [blob_cover(contour, mask, reading) if len(reading) >= 2 else 0.0 for reading in readings]
+        best = int(np.argmax(covers))
+        if covers[best] < CLUSTER_COVER:
+            return []
+        members = readings[best]
+        results: list[Measured] = []
+        for member in members:
+            others = mask.copy()
+            for other in members:
+                if other is not member:
+                    cv2.circle(others, (int(round(other.x)), int(round(other.y))),
+                               int(math.ceil(other.radius * 1.08 + 1)), EXPLAINED, -1)
+            on_mask = measure_mask(member, others)
+            if on_mask is None or on_mask.fill < CLUSTER_FILL or on_mask.spread > CLUSTER_SPREAD:
+                continue
+            ball = Candidate(member.x, member.y, member.radius)
+            results.append((ball, CandidateMetrics(mask=on_mask, colour=colour_stats(ball, search.planes),
+                                                   size=ball.radius / search.small_radius)))
         return results
 
     def _accept(self, measured: list[Measured], search: FrameSearch) -> list[Candidate]:

@@ -26,6 +26,16 @@ HOUGH_CIRCLES_SCANNED = 40
 # ball's logo or highlight is a fraction of it, the opening of a ring is most of it.
 HOLE_SHARE = 0.5
 _BOUNDARY_KERNEL = np.ones((3, 3), np.uint8)
+# Touching balls of one colour are one blob with no edge between them. Their proposals: the
+# blob's largest inscribed discs, one after another (at most CLUSTER_BALLS, none under
+# CLUSTER_SMALLEST of the first's radius: balls of one kind, near each other, are about one
+# size; each erases CLUSTER_ERASE times its radius), besides Hough's circles. A set of them
+# is a cluster of balls only if it covers CLUSTER_COVER of the blob: a row of discs covers ~78 %
+# of a tube or strip, a heap of balls nearly all of itself.
+CLUSTER_BALLS = 8
+CLUSTER_SMALLEST = 0.5
+CLUSTER_COVER = 0.85
+CLUSTER_ERASE = 1.2
 
 
 @dataclass
@@ -152,6 +162,50 @@ def hough_proposals(box: tuple[int, int, int, int], search: FrameSearch,
             if len(proposals) >= HOUGH_CIRCLES_PER_BLOB:
                 break
     return proposals
+
+
+def blob_image(contour: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The blob's pixels of ``mask`` (0/255) on a canvas one pixel wider than its box all
+    round, and the canvas's origin (left, top) in the frame."""
+    left, top, blob_width, blob_height = cv2.boundingRect(contour)
+    blob = np.zeros((blob_height + 2, blob_width + 2), np.uint8)
+    cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(1 - left, 1 - top))
+    blob &= cv2.copyMakeBorder(mask[top:top + blob_height, left:left + blob_width],
+                               1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    return blob, left - 1, top - 1
+
+
+def inscribed_discs(contour: np.ndarray, search: FrameSearch,
+                    taken: list[Candidate]) -> list[Candidate]:
+    """The largest inscribed discs, one after another (see CLUSTER_BALLS), of what the
+    ``taken`` circles leave of the blob, largest first, in frame coordinates; they propose the
+    balls of a cluster of touching balls."""
+    blob, left, top = blob_image(contour, search.mask)
+    area = cv2.countNonZero(blob)
+    for circle in taken:
+        cv2.circle(blob, (int(round(circle.x - left)), int(round(circle.y - top))),
+                   int(math.ceil(1.08 * circle.radius + 1)), 0, -1)
+    discs: list[Candidate] = []
+    while len(discs) < CLUSTER_BALLS and cv2.countNonZero(blob) > (1.0 - CLUSTER_COVER) * area:
+        distance = cv2.distanceTransform(blob, cv2.DIST_L2, 5)
+        _, radius, _, (x, y) = cv2.minMaxLoc(distance)
+        if radius < max(search.min_radius, CLUSTER_SMALLEST * (discs[0].radius if discs else 0.0)):
+            break
+        # (distance to the nearest pixel off the blob: the disc reaches half a pixel further)
+        discs.append(Candidate(float(x + left), float(y + top), float(radius) + 0.5))
+        cv2.circle(blob, (x, y), int(math.ceil(CLUSTER_ERASE * radius + 1)), 0, -1)
+    return discs
+
+
+def blob_cover(contour: np.ndarray, mask: np.ndarray, discs: list[Candidate]) -> float:
+    """Fraction of the blob's pixels in one of ``discs`` (8 % and a pixel wider: a mask's edge
+    is ragged)."""
+    blob, left, top = blob_image(contour, mask)
+    covered = np.zeros_like(blob)
+    for disc in discs:
+        cv2.circle(covered, (int(round(disc.x - left)), int(round(disc.y - top))),
+                   int(math.ceil(1.08 * disc.radius + 1)), 255, -1)
+    return cv2.countNonZero(blob & covered) / max(1, cv2.countNonZero(blob))
 
 
 def leftover_blobs(balls: list[Candidate], explained: np.ndarray) -> list[np.ndarray]:

@@ -129,6 +129,18 @@ def test_a_row_of_three_touching_balls(detector):
         assert_found(result.detections, *ball)
 
 
+def test_a_heap_of_touching_balls_of_flat_colour(detector):
+    # No shading between them: one blob of colour, split into its balls.
+    image = to_uint8(floor())
+    balls = [(300.0, 240.0, 22.0), (343.0, 246.0, 22.0), (321.0, 283.0, 22.0), (366.0, 284.0, 21.0)]
+    for u, v, radius in balls:
+        cv2.circle(image, (int(u), int(v)), int(radius), TENNIS_BGR, -1, cv2.LINE_AA)
+    result = detector.detect(image)
+    assert len(result.detections) == len(balls), result.detections
+    for u, v, radius in balls:
+        assert_found(result.detections, u, v, radius, centre_tolerance=2.0, radius_tolerance=0.1)
+
+
 def test_detections_are_sorted_largest_first(detector):
     balls = [(100.0, 100.0, 8.0), (500.0, 120.0, 30.0), (300.0, 350.0, 16.0)]
     result = detector.detect(scene(balls))

@@ -9,9 +9,11 @@ import pytest
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
-from balltrack.services.detector.proposals import (HOUGH_CIRCLES_PER_BLOB, blob_proposals,
+from balltrack.services.detector.proposals import (CLUSTER_COVER, HOUGH_CIRCLES_PER_BLOB,
+                                                   blob_proposals,
                                                    boundary_points, frame_search, hough_proposals,
-                                                   fill_holes, leftover_blobs)
+                                                   blob_cover, fill_holes, inscribed_discs,
+                                                   leftover_blobs)
 
 SHAPE = (240, 320)
 
@@ -132,3 +134,30 @@ def test_leftover_blobs_are_the_pieces_near_an_accepted_ball():
     # the neighbour's part outside the accepted ball's disc, in frame coordinates
     assert 145 <= left <= 150 and left + width == 176 and 105 <= top <= 107
     assert leftover_blobs([], explained) == []
+
+
+def test_a_cluster_of_touching_balls_splits_into_inscribed_discs_that_cover_it():
+    centres = [(100.0, 120.0), (139.0, 124.0), (120.0, 158.0)]
+    mask = np.zeros(SHAPE, np.uint8)
+    for x, y in centres:
+        mask |= disc(SHAPE, x, y, 20.0)
+    [blob] = fill_holes(mask)[0]
+    discs = inscribed_discs(blob, search_of(mask), [])
+    assert len(discs) == 3
+    for x, y in centres:
+        nearest = min(discs, key=lambda found: math.hypot(found.x - x, found.y - y))
+        # (proposals: the refinement on the mask's boundary follows)
+        assert math.hypot(nearest.x - x, nearest.y - y) < 4.0 and abs(nearest.radius - 20.0) < 3.0
+    assert blob_cover(blob, mask, discs) >= CLUSTER_COVER
+    # with two balls already taken, the third is what is left
+    [third] = inscribed_discs(blob, search_of(mask), [Candidate(x, y, 20.0) for x, y in centres[:2]])
+    assert math.hypot(third.x - centres[2][0], third.y - centres[2][1]) < 3.0
+
+
+def test_a_strip_is_not_covered_by_its_inscribed_discs():
+    strip = np.zeros(SHAPE, np.uint8)
+    strip[100:120, 40:280] = 255
+    [blob] = fill_holes(strip)[0]
+    discs = inscribed_discs(blob, search_of(strip), [])
+    assert len(discs) >= 2
+    assert blob_cover(blob, strip, discs) < CLUSTER_COVER
