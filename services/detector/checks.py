@@ -27,6 +27,12 @@ LOW_CHROMA = 6.0
 # rim in places (corners) is a polygon, not a ball.
 CORNER_SPREAD = 0.07
 CORNER_LEAK = 0.08
+# A candidate that is plainly a ball by shape (clean, an edge this even, at least
+# SURE_SIZE times small_radius for the evenness to mean something) needs only its colour in
+# the hue range, not hue_margin inside it: a ball under a warm lamp is yellower than felt in
+# daylight.
+SURE_SPREAD = 0.05
+SURE_SIZE = 2.0
 # Samples along each ray when measuring how round a blob's edge is.
 EDGE_STEPS = 25
 
@@ -217,7 +223,9 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
         return None
     # (the mask pixels' mean: a two-colour ball's other half does not count)
-    if config.hue_margin > 0 and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5):
+    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
+    if (config.hue_margin > 0 and not sure_by_shape
+            and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
     # circle in places (a box face); a ball's edge is even, its neighbours add no spread.

@@ -117,8 +117,8 @@ def test_judge_scores_a_ball():
     ({"outside": 0.35}, {}, 3.0),                      # in a large area of colour
     ({}, {"colourfulness": 0.2}, 3.0),                 # dull
     ({}, {"mean_chroma": 3.0, "mean_hue": 15.0}, 3.0),  # dim, and the mean colour is orange
-    ({}, {"colour_hue": 26.0}, 3.0),                   # its colour at the orange end (wood, skin)
-    ({}, {"colour_hue": 48.5}, 3.0),                   # or at the green end (leaves)
+    ({"spread": 0.06}, {"colour_hue": 26.0}, 3.0),     # its colour at the orange end (wood, skin)
+    ({"spread": 0.06}, {"colour_hue": 48.5}, 3.0),     # or at the green end (leaves)
     ({"spread": 0.1, "leak": 0.1, "support": 0.99}, {}, 3.0),  # corners
     ({"fill": 0.56, "support": 0.46}, {}, 3.0),        # each check passed, but below min_score
 ])
@@ -142,5 +142,10 @@ def test_judge_accepts_what_the_rejections_border_on():
     # the colour's hue just inside the margin
     edge = dataclasses.replace(GOOD_COLOUR, colour_hue=config.h_min + config.hue_margin)
     assert judge(CandidateMetrics(GOOD_MASK, edge, size=3.0), config) is not None
+    # plainly a ball by shape (clean, even edge, large): its colour need only be in the range
+    warm = dataclasses.replace(GOOD_COLOUR, colour_hue=26.0)
+    assert judge(CandidateMetrics(GOOD_MASK, warm, size=3.0), config) is not None
+    assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), warm, size=3.0), config) is None
+    assert judge(CandidateMetrics(GOOD_MASK, warm, size=1.5), config) is None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None
