@@ -93,8 +93,9 @@ class DetectorConfig:
     # light), but the mean colour of a ball's disc is its felt's: tennis balls measure H 28-44
     # (5th-95th percentile) on the real dev photos, while wood, skin, lamps and orange light
     # sit at the range's orange end.
-    hue_margin: float = param(3.0, "the mean colour of a candidate's disc must lie this far inside the hue "
-                                   "range (OpenCV H units)", low=0, high=45)
+    hue_margin: float = param(3.0, "the mean colour of a candidate's colour-mask pixels must lie this far "
+                                   "inside the hue range (OpenCV H units), unless its shape alone makes it "
+                                   "plainly a ball", low=0, high=45)
     max_detections: int = param(16, "most balls reported per frame (largest first)", low=1)
 
     # Shrinking is for speed.
