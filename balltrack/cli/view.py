@@ -24,11 +24,12 @@ def _fail(args, reason: str, status: int) -> int:
 def _serve_rerun(args, session, stop) -> int:
     import rerun as rr
 
-    from balltrack.deploy.view import RerunBridge
+    from balltrack.deploy.view import RerunBridge, rerun_blueprint
 
     recording = rr.RecordingStream("balltrack")
     try:
-        server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit)
+        server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit,
+                                      default_blueprint=rerun_blueprint())
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=server)
     except Exception as error:  # the port taken, an address not ours
         return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
