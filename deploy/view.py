@@ -2,13 +2,8 @@
 republished for Foxglove (``balltrack view --foxglove``).
 
 A :class:`FoxgloveBridge` subscribes on an open Zenoh session and logs, into a Foxglove context
-(served over WebSocket by ``foxglove.start_server``, or written to MCAP by ``foxglove.open_mcap``):
-
-    /image             CompressedImage (JPEG)   the detector's annotated frame (``image_out``)
-    /scene             SceneUpdate              one sphere per located ball (``detected_ball_3d``,
-                                                camera_optical frame) and the true balls (world)
-    /tf                FrameTransform           world -> base_link from ``sim/ground_truth``
-    /cmd_vel           JSON                     the follower's Twist, for plots
+(served over WebSocket by ``foxglove.start_server``, or written to MCAP by ``foxglove.open_mcap``),
+the channels of ``deploy/foxglove_messages.py``: /image, /scene, /tf and /cmd_vel.
 
 Subscribing to ``image_out`` is what makes the detector draw it, so the viewer costs the
 detector one annotated frame per camera frame while it runs. Zenoh callbacks only decode and
@@ -19,45 +14,18 @@ are dropped and counted (:attr:`Bridge.rejected`).
 """
 
 import collections
-import math
 import threading
 
-import cv2
 import foxglove
 import rerun as rr
 from foxglove.channels import CompressedImageChannel, FrameTransformChannel, SceneUpdateChannel
-from foxglove.messages import (Color, CompressedImage, FrameTransform, Pose, Quaternion, SceneEntity,
-                               SceneUpdate, SpherePrimitive, Timestamp, Vector3)
 
 from balltrack.common.images import image_to_bgr
 from balltrack.common.keys import CMD_VEL, DETECTED_BALL_3D, GROUND_TRUTH, IMAGE_OUT, Keys
 from balltrack.common.messages import MessageError, decode
-
-DETECTED_COLOUR = Color(r=0.8, g=1.0, b=0.2, a=0.9)  # the tennis ball's yellow-green
-TRUE_COLOUR = Color(r=0.3, g=0.6, b=1.0, a=0.4)      # ground truth: translucent blue
-DETECTED_DIAMETER = 0.067  # a tennis ball; Ball3D carries no radius
-
-TWIST_SCHEMA = {
-    "type": "object",
-    "properties": {
-        "stamp": {"type": "integer"},
-        "linear": {"type": "array", "items": {"type": "number"}},
-        "angular": {"type": "array", "items": {"type": "number"}},
-    },
-}
-
-
-def timestamp(nanoseconds: int) -> Timestamp:
-    return Timestamp(nanoseconds // 1_000_000_000, nanoseconds % 1_000_000_000)
-
-
-def yaw_quaternion(yaw: float) -> Quaternion:
-    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
-
-
-def _point(x: float, y: float, z: float) -> Pose:
-    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(w=1.0))
-
+from balltrack.deploy.foxglove_messages import (CMD_VEL_TOPIC, IMAGE_TOPIC, SCENE_TOPIC, TF_TOPIC, TWIST_SCHEMA,
+                                                compressed_image, jpeg_of, located_scene, robot_transform,
+                                                truth_scene, twist_json)
 
 class Bridge:
     """Subscribes to ``namespace``'s keys on ``session`` and hands each decoded message to a
@@ -131,12 +99,9 @@ class Bridge:
 
     def show_image(self, image: dict) -> None:
         """The annotated frame; by default as JPEG bytes to :meth:`show_jpeg`."""
-        if image["encoding"] == "jpeg":  # already compressed: passed on as is, no re-encoding
-            self.show_jpeg(image["header"], bytes(image["data"]))
-            return
-        ok, buffer = cv2.imencode(".jpg", image_to_bgr(image), [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
-        if ok:
-            self.show_jpeg(image["header"], buffer.tobytes())
+        jpeg = jpeg_of(image, self.jpeg_quality)  # a JPEG frame passes as it is
+        if jpeg is not None:
+            self.show_jpeg(image["header"], jpeg)
 
     def show_jpeg(self, header: dict, data: bytes) -> None:
         raise NotImplementedError
@@ -161,45 +126,30 @@ class Bridge:
 
 
 class FoxgloveBridge(Bridge):
-    """Republishes balltrack's keys as Foxglove messages into ``context`` (the SDK's default
-    context when None): served by ``foxglove.start_server``, or written by ``foxglove.open_mcap``."""
+    """Republishes balltrack's keys as Foxglove messages (``deploy/foxglove_messages.py``) into
+    ``context`` (the SDK's default context when None): served by ``foxglove.start_server``, or
+    written by ``foxglove.open_mcap``."""
 
     def __init__(self, session, namespace: str = "", context: foxglove.Context | None = None,
                  jpeg_quality: int = 80):
-        self.image = CompressedImageChannel("/image", context=context)
-        self.scene = SceneUpdateChannel("/scene", context=context)
-        self.transform = FrameTransformChannel("/tf", context=context)
-        self.cmd_vel = foxglove.Channel("/cmd_vel", schema=TWIST_SCHEMA, context=context)
+        self.image = CompressedImageChannel(IMAGE_TOPIC, context=context)
+        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=context)
+        self.transform = FrameTransformChannel(TF_TOPIC, context=context)
+        self.cmd_vel = foxglove.Channel(CMD_VEL_TOPIC, schema=TWIST_SCHEMA, context=context)
         super().__init__(session, namespace, jpeg_quality)
 
     def show_jpeg(self, header: dict, data: bytes) -> None:
-        self.image.log(CompressedImage(timestamp=timestamp(header["stamp"]), frame_id=header["frame_id"],
-                                       data=data, format="jpeg"))
+        self.image.log(compressed_image(header, data))
 
     def show_ball(self, ball: dict) -> None:
-        header = ball["header"]
-        sphere = SpherePrimitive(pose=_point(ball["x"], ball["y"], ball["z"]),
-                                 size=Vector3(x=DETECTED_DIAMETER, y=DETECTED_DIAMETER, z=DETECTED_DIAMETER),
-                                 color=DETECTED_COLOUR)
-        entity = SceneEntity(timestamp=timestamp(header["stamp"]), frame_id=header["frame_id"],
-                             id="detected_ball", spheres=[sphere])
-        self.scene.log(SceneUpdate(entities=[entity]))
+        self.scene.log(located_scene(ball))
 
     def show_truth(self, truth: dict) -> None:
-        stamp, robot = truth["header"]["stamp"], truth["robot"]
-        self.transform.log(FrameTransform(timestamp=timestamp(stamp), parent_frame_id="world",
-                                          child_frame_id="base_link",
-                                          translation=Vector3(x=robot["x"], y=robot["y"], z=0.0),
-                                          rotation=yaw_quaternion(robot["yaw"])))
-        spheres = [SpherePrimitive(pose=_point(*ball["position"]),
-                                   size=Vector3(x=2 * ball["radius"], y=2 * ball["radius"], z=2 * ball["radius"]),
-                                   color=TRUE_COLOUR) for ball in truth["balls"]]
-        entity = SceneEntity(timestamp=timestamp(stamp), frame_id="world", id="true_balls", spheres=spheres)
-        self.scene.log(SceneUpdate(entities=[entity]))
+        self.transform.log(robot_transform(truth))
+        self.scene.log(truth_scene(truth))
 
     def show_twist(self, twist: dict) -> None:
-        self.cmd_vel.log({"stamp": twist["header"]["stamp"], "linear": list(twist["linear"]),
-                          "angular": list(twist["angular"])})
+        self.cmd_vel.log(twist_json(twist))
 
 
 PATH_POINTS = 20_000  # the robot path kept for the line strip (over 10 min at 30 Hz)

@@ -62,7 +62,8 @@ def command_record(args) -> int:
     keys = args.keys or DEFAULT_KEYS
     try:
         try:
-            recording = Recording(session, args.output, keys, args.namespace)
+            recording = Recording(session, args.output, keys, args.namespace,
+                                  foxglove=False if args.no_foxglove else None)
         except RecordingError as error:
             return _fail(args, str(error), 1)
         except Exception as error:  # e.g. a key expression Zenoh refuses
@@ -198,6 +199,9 @@ def register(commands) -> None:
                         help="keys or key expressions (default: every data and stats key)")
     record.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
+    record.add_argument("--no-foxglove", action="store_true",
+                        help="only the msgpack channels (default: also Foxglove-typed channels "
+                             "for viewing, when foxglove-sdk is installed)")
     record.add_argument("--progress", type=float, default=0.0, metavar="S",
                         help="print the messages written so far every S seconds on stderr")
     replay = networked(commands, "play", "publish a recording again", command_play)
