@@ -15,6 +15,7 @@ are dropped and counted (:attr:`Bridge.rejected`).
 
 import collections
 import threading
+import time
 
 import foxglove
 import rerun as rr
@@ -27,6 +28,9 @@ from balltrack.deploy.foxglove_messages import (CMD_VEL_TOPIC, IMAGE_TOPIC, SCEN
                                                 compressed_image, jpeg_of, located_scene, robot_transform,
                                                 truth_scene, twist_json)
 
+LAGS_KEPT = 100_000
+
+
 class Bridge:
     """Subscribes to ``namespace``'s keys on ``session`` and hands each decoded message to a
     ``show_*`` method of a subclass (a viewer) until :meth:`close`: ``show_jpeg`` (the annotated
@@ -38,10 +42,13 @@ class Bridge:
         self.rejected = 0
         self.dropped = 0  # the viewer was more than max_queued messages behind
         self.handled = 0  # valid messages passed to a show_* method
-        # (show method, message); the newest frame waits apart, only the newest one is shown
+        self.skipped_frames = 0  # a newer frame came before the viewer had shown this one
+        # Seconds from a message's arrival to the end of its show_* call, the newest LAGS_KEPT.
+        self.lags: collections.deque = collections.deque(maxlen=LAGS_KEPT)
+        # (show method, message, arrival); the newest frame waits apart, only it is shown
         self._queued: collections.deque = collections.deque()
         self._max_queued = max_queued
-        self._newest_frame: dict | None = None
+        self._newest_frame: tuple[dict, float] | None = None
         self._closing = False
         self._ready = threading.Condition()
         self._worker = threading.Thread(target=self._show_queued, name="view-worker", daemon=True)
@@ -61,6 +68,7 @@ class Bridge:
         # Zenoh's callback only decodes and queues: a viewer that blocks (Rerun's server waits
         # for its slowest web viewer) must not hold up the session's other callbacks.
         def on_sample(sample):
+            arrival = time.monotonic()
             try:
                 decoded = decode(message, sample.payload.to_bytes())
             except MessageError:
@@ -68,12 +76,13 @@ class Bridge:
                 return
             with self._ready:
                 if handler is None:
-                    self._newest_frame = decoded
+                    self.skipped_frames += self._newest_frame is not None
+                    self._newest_frame = (decoded, arrival)
                 elif len(self._queued) >= self._max_queued:
                     self.dropped += 1
                     return
                 else:
-                    self._queued.append((handler, decoded))
+                    self._queued.append((handler, decoded, arrival))
                 self._ready.notify()
         return on_sample
 
@@ -84,15 +93,17 @@ class Bridge:
                 if self._closing:
                     return
                 if self._queued:
-                    handler, message = self._queued.popleft()
+                    handler, message, arrival = self._queued.popleft()
                 else:
-                    handler, message, self._newest_frame = self._show_image, self._newest_frame, None
+                    (message, arrival), self._newest_frame = self._newest_frame, None
+                    handler = self._show_image
             try:
                 handler(message)
             except MessageError:
                 self.rejected += 1
                 continue
             self.handled += 1
+            self.lags.append(time.monotonic() - arrival)
 
     def _show_image(self, image: dict) -> None:
         self.show_image(image)

@@ -62,8 +62,12 @@ def _serve_foxglove(args, session, stop) -> int:
 
 
 def _report(bridge) -> int:
-    if bridge.rejected:
-        print(f"balltrack view: {bridge.rejected} malformed message(s) dropped", file=sys.stderr)
+    # One summary line (the viewer_cost experiment reads it): what was shown and how late.
+    lags = sorted(bridge.lags)
+    lag = (f"; arrival -> shown p50 {1000 * lags[len(lags) // 2]:.1f} ms, "
+           f"p99 {1000 * lags[min(len(lags) - 1, int(0.99 * len(lags)))]:.1f} ms" if lags else "")
+    print(f"balltrack view: shown {bridge.handled} messages, {bridge.skipped_frames} older frames skipped, "
+          f"{bridge.dropped} dropped, {bridge.rejected} malformed{lag}", file=sys.stderr)
     return 0
 
 
