@@ -19,7 +19,6 @@ import argparse
 import io
 import json
 import re
-import subprocess
 import sys
 import tempfile
 import threading
@@ -30,7 +29,7 @@ from balltrack.common.network import free_port
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.base import quantile
-from balltrack.experiments.processes import cpu_seconds
+from balltrack.experiments.processes import Command, cpu_seconds
 from balltrack.experiments.soak import SCENARIO, Counters
 
 WARM_UP_SECONDS = 5.0  # after a viewer starts: its subscriptions routed, the detector drawing
@@ -95,22 +94,9 @@ def _wait_for_positions(counters: Counters, timeout: float = 120) -> None:
         time.sleep(0.1)  # polling the counters; the deadline bounds it
 
 
-def _viewer(arguments: list[str], log: Path, ready: str, timeout: float = 60) -> subprocess.Popen:
-    process = subprocess.Popen([sys.executable, "-m", "balltrack", "view", *arguments],
-                               stdout=subprocess.DEVNULL, stderr=open(log, "w"))
-    deadline = time.monotonic() + timeout
-    while ready not in log.read_text():
-        if process.poll() is not None or time.monotonic() > deadline:
-            process.kill()
-            raise RuntimeError(f"balltrack view did not start: {log.read_text()[-500:]}")
-        time.sleep(0.1)  # polling the log for the ready line; the deadline bounds it
-    return process
-
-
-def _stop(process: subprocess.Popen, log: Path) -> str:
-    process.terminate()
-    process.wait(timeout=30)
-    found = SUMMARY.search(log.read_text())
+def _summary(command: Command) -> str:
+    command.stop()
+    found = SUMMARY.search(command.output())
     return found.group(1) if found else "(no summary line)"
 
 
@@ -131,24 +117,24 @@ def main(argv=None) -> int:
             detector = {"detector": system.pid("detector")}
             rows.append(("no viewer", _measure(counters, detector, args.seconds), ""))
 
-            log = Path(folder) / "rerun.log"
-            rerun = _viewer(["--connect", system.endpoint, "--port", str(free_port()),
-                             "--grpc-port", str(free_port())], log, "Rerun viewer on")
+            rerun = Command(["view", "--connect", system.endpoint, "--port", str(free_port()),
+                             "--grpc-port", str(free_port())], Path(folder) / "rerun.log")
+            rerun.wait_for("Rerun viewer on")
             time.sleep(WARM_UP_SECONDS)
             row = _measure(counters, {**detector, "viewer": rerun.pid}, args.seconds)
-            rows.append(("Rerun (no browser)", row, _stop(rerun, log)))
+            rows.append(("Rerun (no browser)", row, _summary(rerun)))
 
-            log = Path(folder) / "foxglove.log"
             port = free_port()
-            foxglove = _viewer(["--foxglove", "--connect", system.endpoint, "--port", str(port)], log,
-                               "Foxglove server on")
+            foxglove = Command(["view", "--foxglove", "--connect", system.endpoint, "--port", str(port)],
+                               Path(folder) / "foxglove.log")
+            foxglove.wait_for("Foxglove server on")
             client = FoxgloveClient(f"ws://127.0.0.1:{port}")
             time.sleep(WARM_UP_SECONDS)
             row = _measure(counters, {**detector, "viewer": foxglove.pid}, args.seconds)
             received = client.messages
             client.close()
             rows.append((f"Foxglove (1 client, {received / args.seconds:.0f} msg/s)", row,
-                         _stop(foxglove, log)))
+                         _summary(foxglove)))
 
             rows.append(("no viewer, again", _measure(counters, detector, args.seconds), ""))
         finally:
