@@ -1,4 +1,5 @@
-"""What watching costs: ``balltrack view`` (Rerun, then Foxglove) beside the running system.
+"""What watching and bridging cost: ``balltrack view`` (Rerun, then Foxglove) and the ROS 2
+bridge beside the running system.
 
     python -m balltrack.experiments.viewer_cost [--seconds 30]
 
@@ -6,13 +7,17 @@ Starts the whole system (router, simulator in realtime pacing on the ``orbit`` s
 at 30 Hz, detector, locator, follower) and measures, for ``--seconds`` each, in this order:
 no viewer, ``balltrack view`` (Rerun, no browser attached: the gRPC server keeps the data for
 one), ``balltrack view --foxglove`` with a WebSocket client of this program subscribed to every
-channel (so the server encodes and sends everything), and no viewer again. Per phase:
+channel (so the server encodes and sends everything), the ROS 2 bridge (``balltrack run
+ros2_bridge``, its defaults: detected_ball, detected_ball_3d and cmd_vel out to ROS), and no
+viewer again. Per phase:
 
 * frame -> ``detected_ball_3d`` latency p50/p99 at this program's subscriber (as the soak and the
   demo measure it): what the viewer adds to the robot's reaction time;
-* CPU (% of one core) of the viewer and of the detector, which draws ``image_out`` only while
+* CPU (% of one core) of the viewer or bridge ("it") and of the detector, which draws ``image_out`` only while
   someone subscribes to it;
-* the viewer's own lag, arrival of a message -> shown (its exit line), and what it shown/skipped.
+* the viewer's own lag, arrival of a message -> shown (its exit line), and what it showed/skipped;
+* the bridge's added latency: arrival of a ``detected_ball_3d`` -> arrival of the same stamp's
+  ``PointStamped`` on ``ros/detected_ball_3d``, both at this program's subscribers.
 """
 
 import argparse
@@ -25,6 +30,8 @@ import threading
 import time
 from pathlib import Path
 
+from balltrack.common import keys
+from balltrack.common.messages import MessageError, decode
 from balltrack.common.network import free_port
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
@@ -94,6 +101,43 @@ def _wait_for_positions(counters: Counters, timeout: float = 120) -> None:
         time.sleep(0.1)  # polling the counters; the deadline bounds it
 
 
+class BridgeLag:
+    """Arrival of each ``detected_ball_3d`` and of its ROS 2 twin, matched by header stamp."""
+
+    def __init__(self, session):
+        from balltrack.services.ros2_bridge import convert
+
+        self.lags: list[float] = []
+        self._arrival: dict[int, float] = {}
+        self._lock = threading.Lock()
+
+        def on_ball(sample):
+            arrival = time.monotonic()
+            try:
+                stamp = decode("Ball3D", sample.payload.to_bytes())["header"]["stamp"]
+            except MessageError:
+                return
+            with self._lock:
+                self._arrival[stamp] = arrival
+                if len(self._arrival) > 1000:  # the twin comes within milliseconds; keep a few
+                    for old in sorted(self._arrival)[:500]:
+                        del self._arrival[old]
+
+        def on_ros(sample):
+            arrival = time.monotonic()
+            stamp = convert.stamp_from_ros(convert.deserialize(sample.payload.to_bytes(), convert.POINT_STAMPED).header)
+            with self._lock:
+                if stamp in self._arrival:
+                    self.lags.append(arrival - self._arrival.pop(stamp))
+
+        self._subscribers = [session.declare_subscriber(keys.DETECTED_BALL_3D, on_ball),
+                             session.declare_subscriber("ros/" + keys.DETECTED_BALL_3D, on_ros)]
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
+
+
 def _summary(command: Command) -> str:
     command.stop()
     found = SUMMARY.search(command.output())
@@ -136,12 +180,27 @@ def main(argv=None) -> int:
             rows.append((f"Foxglove (1 client, {received / args.seconds:.0f} msg/s)", row,
                          _summary(foxglove)))
 
+            bridge = Command(["run", "ros2_bridge", "--connect", system.endpoint], Path(folder) / "bridge.log")
+            lag = BridgeLag(session)
+            try:
+                bridge.wait_for("routes:")
+                time.sleep(WARM_UP_SECONDS)
+                lag.lags.clear()
+                row = _measure(counters, {**detector, "viewer": bridge.pid}, args.seconds)
+                lags = list(lag.lags)
+            finally:
+                lag.close()
+                bridge.stop()
+            rows.append(("ROS 2 bridge", row, f"{len(lags)} PointStamped; detected_ball_3d -> ros/detected_ball_3d "
+                         f"p50 {1000 * (quantile(lags, 0.5) or float('nan')):.2f} ms, "
+                         f"p99 {1000 * (quantile(lags, 0.99) or float('nan')):.2f} ms"))
+
             rows.append(("no viewer, again", _measure(counters, detector, args.seconds), ""))
         finally:
             counters.close()
             session.close()
     print(f"{args.seconds:g} s per phase, 640x480 at 30 Hz, scenario {SCENARIO}")
-    print(f"{'phase':<40} {'frames/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'detector %':>10} {'viewer %':>9}")
+    print(f"{'phase':<40} {'frames/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'detector %':>10} {'it %':>9}")
     for name, row, _ in rows:
         viewer = row.get("viewer_cpu_percent")
         print(f"{name:<40} {row['frames_per_s']:>8.1f} {row['p50_ms']:>7.1f} {row['p99_ms']:>7.1f} "
