@@ -36,8 +36,8 @@ from balltrack.common.messages import SCHEMAS, decode, encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, progress
-from balltrack.services.simulator.control import send_command
 from balltrack.experiments.processes import resident_mb
+from balltrack.services.simulator.control import send_command
 
 NAME = "fuzz"
 TITLE = "Fuzz campaign: malformed messages to every key and query of the running services"

@@ -29,8 +29,8 @@ import numpy as np
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
-from balltrack.services.ros2_bridge import convert
 from balltrack.experiments.processes import cpu_seconds
+from balltrack.services.ros2_bridge import convert
 
 def ball3d(index: int) -> bytes:
     return encode("Ball3D", {"header": header(index, index, "camera_optical"),
