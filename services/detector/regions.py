@@ -1,0 +1,183 @@
+"""Regions of interest of the colour mask (steps 2-4 of the detector, see ``mask.py``).
+
+Most of a frame is not ball-coloured, and blurring, converting and cleaning all of it costs
+more than the rest of the detector. So the colour is first looked for on a copy shrunk
+COARSE_STEP times (area averages) with loose thresholds, and steps 2-4 run at full resolution
+only in boxes around what passed: inside a box the mask is the whole frame's, outside it is
+empty. The one plane that needs the whole frame is the CLAHE-equalised value (its tiles'
+histograms); it is taken from the half-size copy, blurred there instead of at full size.
+"""
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.config import DetectorConfig
+
+# The coarse search: the frame shrunk this many times, each side.
+COARSE_STEP = 4
+# The coarse search lets through hues up to this far outside h_min..h_max and saturations down
+# to this share of s_min: the average of a 4x4 cell that a small or blurred ball only partly
+# covers is paler and mixed with its background.
+COARSE_HUE_SLACK = 10
+COARSE_SATURATION_SHARE = 0.5
+# Frames at most this wide (px) equalise at full size (see ColourMasker.equalise), frames
+# smaller than REGIONS_MIN_HEIGHT are not worth shrinking, and frames of an odd width or height
+# are not exactly twice their half size: all are done whole.
+REGIONS_MIN_WIDTH = 321
+REGIONS_MIN_HEIGHT = 128
+# A box reaches this far (px) past the coarse cells that passed.
+REGION_MARGIN = 8
+# Around a box its mask is computed on this many px more (blur 2 + opening 2 + closing 4), so
+# that inside the box it is the whole frame's.
+COMPUTE_MARGIN = 10
+# A box whose mask touches its edge (a blob that may go on past it) grows by this much (px),
+# for at most MAX_REGION_ROUNDS rounds.
+REGION_GROWTH = 24
+MAX_REGION_ROUNDS = 4
+# Beyond this share of the frame in boxes, doing the whole frame is cheaper.
+MAX_REGION_SHARE = 0.5
+# The half-size value plane is blurred with this Gaussian (sigma, px) before CLAHE: the 5 px
+# blur of the full frame, halved (measured on renders and photos, it matches the full-size
+# route's plane best).
+HALF_BLUR_SIGMA = 0.55
+# A part of the half-size plane needing more than this share of its CLAHE tiles: the whole
+# plane is equalised (once) instead.
+PART_TILES_SHARE = 0.5
+
+Box = tuple[int, int, int, int]  # left, top, right, bottom (full-size px, right/bottom excluded)
+
+
+def coarse_hue_table(config: DetectorConfig) -> np.ndarray:
+    """256-entry lookup table: 255 for the hues the coarse search lets through, else 0."""
+    hues = np.arange(256)
+    low, high = config.h_min - COARSE_HUE_SLACK, config.h_max + COARSE_HUE_SLACK
+    if config.h_min <= config.h_max:  # (widened, the range may wrap through 0)
+        inside = (hues >= low) & (hues <= high) | (hues - 180 >= low) | (hues + 180 <= high)
+    else:
+        inside = (hues >= low) | (hues <= high)
+    return np.where(inside & (hues < 180), 255, 0).astype(np.uint8)
+
+
+def regions_apply(shape: tuple[int, ...]) -> bool:
+    """Whether a frame of this shape is worth doing by regions."""
+    height, width = shape[:2]
+    return width >= REGIONS_MIN_WIDTH and height >= REGIONS_MIN_HEIGHT and width % 2 == height % 2 == 0
+
+
+def half_size(frame: np.ndarray) -> np.ndarray:
+    """The frame at half size (2x2 area averages)."""
+    height, width = frame.shape[:2]
+    return cv2.resize(frame, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
+
+
+def coarse_boxes(half: np.ndarray, shape: tuple[int, ...], hue_table: np.ndarray,
+                 config: DetectorConfig) -> list[Box] | None:
+    """Boxes holding every pixel of a frame of ``shape`` whose colour may pass the mask, found
+    on its ``half``-size copy shrunk further; None when they would cover too much of it."""
+    height, width = shape[:2]
+    cells = COARSE_STEP // 2
+    small = cv2.resize(half, (half.shape[1] // cells, half.shape[0] // cells), interpolation=cv2.INTER_AREA)
+    hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+    coarse = cv2.LUT(cv2.extractChannel(hsv, 0), hue_table)
+    coarse &= cv2.inRange(cv2.extractChannel(hsv, 1), int(config.s_min * COARSE_SATURATION_SHARE), 255)
+    if not cv2.countNonZero(coarse):
+        return []
+    # (a ball straddling two cells may pass in neither's neighbour)
+    coarse = cv2.dilate(coarse, None)
+    count, _, stats, _ = cv2.connectedComponentsWithStats(coarse, connectivity=8)
+    covered = sum(int(stats[label, 2]) * int(stats[label, 3]) for label in range(1, count))
+    if covered * COARSE_STEP * COARSE_STEP > MAX_REGION_SHARE * width * height:
+        return None  # much of the frame may be ball-coloured (grass, a yellow floor)
+    boxes = []
+    for left, top, box_width, box_height, _area in stats[1:count]:
+        boxes.append((max(0, int(left) * COARSE_STEP - REGION_MARGIN),
+                      max(0, int(top) * COARSE_STEP - REGION_MARGIN),
+                      min(width, int(left + box_width) * COARSE_STEP + REGION_MARGIN),
+                      min(height, int(top + box_height) * COARSE_STEP + REGION_MARGIN)))
+    return boxes
+
+
+def half_value(half: np.ndarray, rows: slice, columns: slice) -> np.ndarray:
+    """The value plane (max channel) of ``half[rows, columns]``, blurred as the full-size
+    route's would have been before it was halved."""
+    height, width = half.shape[:2]
+    # one pixel more each side for the blur, cut off after it
+    top, left = max(0, rows.start - 1), max(0, columns.start - 1)
+    part = half[top:min(height, rows.stop + 1), left:min(width, columns.stop + 1)]
+    value = cv2.max(cv2.max(cv2.extractChannel(part, 0), cv2.extractChannel(part, 1)),
+                    cv2.extractChannel(part, 2))
+    value = cv2.GaussianBlur(value, (3, 3), HALF_BLUR_SIGMA)
+    return value[rows.start - top:rows.stop - top, columns.start - left:columns.stop - left]
+
+
+def source_span(rows: slice, columns: slice, height: int, width: int) -> tuple[slice, slice]:
+    """Rows and columns of a ``height`` x ``width`` plane that its doubled plane's
+    ``rows``, ``columns`` read (INTER_LINEAR: within one pixel of half their coordinates)."""
+    return (slice(max(0, rows.start // 2 - 1), min(height, (rows.stop - 1) // 2 + 2)),
+            slice(max(0, columns.start // 2 - 1), min(width, (columns.stop - 1) // 2 + 2)))
+
+
+def doubled_part(part: np.ndarray, span: tuple[slice, slice], rows: slice, columns: slice) -> np.ndarray:
+    """``cv2.resize(small, twice its size, INTER_LINEAR)[rows, columns]`` from ``part``, the
+    ``source_span`` of those rows and columns in ``small``."""
+    doubled = cv2.resize(part, (2 * part.shape[1], 2 * part.shape[0]), interpolation=cv2.INTER_LINEAR)
+    top, left = rows.start - 2 * span[0].start, columns.start - 2 * span[1].start
+    return doubled[top:top + rows.stop - rows.start, left:left + columns.stop - columns.start]
+
+
+class PartEqualiser:
+    """CLAHE of the half-size value plane, computed only on the tiles a part of it needs.
+
+    A pixel's CLAHE value depends on the histograms of the (up to four) tiles whose centres
+    surround it, so equalising the tiles around a part and one tile more each way gives the
+    part the whole plane's values. Planes that the tile grid does not divide exactly (OpenCV
+    pads them) and parts needing most of the plane are equalised whole, once.
+    """
+
+    def __init__(self, clahe: cv2.CLAHE, grid: int, half: np.ndarray):
+        self._clahe = clahe
+        self._grid = grid
+        self._half = half
+        height, width = half.shape[:2]
+        self._tile = (height // grid, width // grid)
+        self._tiled = height % grid == 0 and width % grid == 0
+        self._whole: np.ndarray | None = None
+
+    def part(self, rows: slice, columns: slice) -> np.ndarray:
+        """The CLAHE-equalised value plane's ``rows``, ``columns``."""
+        height, width = self._half.shape[:2]
+        if self._whole is None and self._tiled:
+            tile_height, tile_width = self._tile
+            tile_rows = slice(max(0, rows.start // tile_height - 1) * tile_height,
+                              min(self._grid, -(-rows.stop // tile_height) + 1) * tile_height)
+            tile_columns = slice(max(0, columns.start // tile_width - 1) * tile_width,
+                                 min(self._grid, -(-columns.stop // tile_width) + 1) * tile_width)
+            tiles = ((tile_rows.stop - tile_rows.start) // tile_height,
+                     (tile_columns.stop - tile_columns.start) // tile_width)
+            if tiles[0] * tiles[1] <= PART_TILES_SHARE * self._grid * self._grid:
+                self._clahe.setTilesGridSize((tiles[1], tiles[0]))
+                equalised = self._clahe.apply(half_value(self._half, tile_rows, tile_columns))
+                return equalised[rows.start - tile_rows.start:rows.stop - tile_rows.start,
+                                 columns.start - tile_columns.start:columns.stop - tile_columns.start]
+        if self._whole is None:
+            self._clahe.setTilesGridSize((self._grid, self._grid))
+            self._whole = self._clahe.apply(half_value(self._half, slice(0, height), slice(0, width)))
+        return self._whole[rows, columns]
+
+
+def grown_box(box: Box, piece: np.ndarray, width: int, height: int) -> Box | None:
+    """``box`` grown past each of its edges inside the frame that its mask ``piece`` touches
+    (a blob that may go on past it); None when it touches none."""
+    left, top, right, bottom = box
+    grown = (max(0, left - REGION_GROWTH) if left > 0 and piece[:, 0].any() else left,
+             max(0, top - REGION_GROWTH) if top > 0 and piece[0].any() else top,
+             min(width, right + REGION_GROWTH) if right < width and piece[:, -1].any() else right,
+             min(height, bottom + REGION_GROWTH) if bottom < height and piece[-1].any() else bottom)
+    return None if grown == box else grown
+
+
+def compute_window(box: Box, width: int, height: int) -> tuple[slice, slice]:
+    """Rows and columns whose mask is computed for ``box``: the box and COMPUTE_MARGIN more."""
+    left, top, right, bottom = box
+    return (slice(max(0, top - COMPUTE_MARGIN), min(height, bottom + COMPUTE_MARGIN)),
+            slice(max(0, left - COMPUTE_MARGIN), min(width, right + COMPUTE_MARGIN)))
