@@ -178,7 +178,7 @@ class ColourMasker:
             return None
         mask = np.zeros((height, width), np.uint8)
         chroma = np.zeros((height, width), np.uint8)
-        equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, half)
+        equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained, config.blur_kernel)
                      if self._part_clahe is not None else None)
         done = 0
         for _round in range(MAX_REGION_ROUNDS):

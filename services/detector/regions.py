@@ -5,7 +5,7 @@ more than the rest of the detector. So the colour is first looked for on a copy 
 COARSE_STEP times (area averages) with loose thresholds, and steps 2-4 run at full resolution
 only in boxes around what passed: inside a box the mask is the whole frame's, outside it is
 empty. The one plane that needs the whole frame is the CLAHE-equalised value (its tiles'
-histograms); it is taken from the half-size copy, blurred there instead of at full size.
+histograms); it is made only on the CLAHE tiles around the boxes.
 """
 
 import cv2
@@ -18,8 +18,8 @@ COARSE_STEP = 4
 # The coarse search lets through hues up to this far outside h_min..h_max and saturations down
 # to this share of s_min: the average of a 4x4 cell that a small or blurred ball only partly
 # covers is paler and mixed with its background.
-COARSE_HUE_SLACK = 10
-COARSE_SATURATION_SHARE = 0.5
+COARSE_HUE_SLACK = 5
+COARSE_SATURATION_SHARE = 0.75
 # Frames at most this wide (px) equalise at full size (see ColourMasker.equalise), frames
 # smaller than REGIONS_MIN_HEIGHT are not worth shrinking, and frames of an odd width or height
 # are not exactly twice their half size: all are done whole.
@@ -34,12 +34,11 @@ COMPUTE_MARGIN = 10
 # for at most MAX_REGION_ROUNDS rounds.
 REGION_GROWTH = 24
 MAX_REGION_ROUNDS = 4
+# Each box costs about as much as steps 2-4 on this many pixels more (the calls' overhead):
+# boxes are merged while their bounding box costs less than they do apart.
+BOX_OVERHEAD_PIXELS = 6000
 # Beyond this share of the frame in boxes, doing the whole frame is cheaper.
-MAX_REGION_SHARE = 0.5
-# The half-size value plane is blurred with this Gaussian (sigma, px) before CLAHE: the 5 px
-# blur of the full frame, halved (measured on renders and photos, it matches the full-size
-# route's plane best).
-HALF_BLUR_SIGMA = 0.55
+MAX_REGION_SHARE = 0.75
 # A part of the half-size plane needing more than this share of its CLAHE tiles: the whole
 # plane is equalised (once) instead.
 PART_TILES_SHARE = 0.5
@@ -84,30 +83,63 @@ def coarse_boxes(half: np.ndarray, shape: tuple[int, ...], hue_table: np.ndarray
         return []
     # (a ball straddling two cells may pass in neither's neighbour)
     coarse = cv2.dilate(coarse, None)
-    count, _, stats, _ = cv2.connectedComponentsWithStats(coarse, connectivity=8)
-    covered = sum(int(stats[label, 2]) * int(stats[label, 3]) for label in range(1, count))
+    # (the outer contours' boxes are the 8-connected blobs' boxes; cheaper than labelling)
+    contours, _ = cv2.findContours(coarse, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    rectangles = [cv2.boundingRect(contour) for contour in contours]
+    covered = sum(box_width * box_height for _, _, box_width, box_height in rectangles)
     if covered * COARSE_STEP * COARSE_STEP > MAX_REGION_SHARE * width * height:
         return None  # much of the frame may be ball-coloured (grass, a yellow floor)
-    boxes = []
-    for left, top, box_width, box_height, _area in stats[1:count]:
-        boxes.append((max(0, int(left) * COARSE_STEP - REGION_MARGIN),
-                      max(0, int(top) * COARSE_STEP - REGION_MARGIN),
-                      min(width, int(left + box_width) * COARSE_STEP + REGION_MARGIN),
-                      min(height, int(top + box_height) * COARSE_STEP + REGION_MARGIN)))
+    boxes = [(max(0, left * COARSE_STEP - REGION_MARGIN), max(0, top * COARSE_STEP - REGION_MARGIN),
+              min(width, (left + box_width) * COARSE_STEP + REGION_MARGIN),
+              min(height, (top + box_height) * COARSE_STEP + REGION_MARGIN))
+             for left, top, box_width, box_height in rectangles]
+    boxes = merged_boxes(boxes)
+    if sum(box_area(box) for box in boxes) > MAX_REGION_SHARE * width * height:
+        return None
     return boxes
 
 
-def half_value(half: np.ndarray, rows: slice, columns: slice) -> np.ndarray:
-    """The value plane (max channel) of ``half[rows, columns]``, blurred as the full-size
-    route's would have been before it was halved."""
-    height, width = half.shape[:2]
-    # one pixel more each side for the blur, cut off after it
-    top, left = max(0, rows.start - 1), max(0, columns.start - 1)
-    part = half[top:min(height, rows.stop + 1), left:min(width, columns.stop + 1)]
+def box_area(box: Box) -> int:
+    """Pixels of ``box`` with the margin its mask is computed on."""
+    left, top, right, bottom = box
+    return (right - left + 2 * COMPUTE_MARGIN) * (bottom - top + 2 * COMPUTE_MARGIN)
+
+
+def merged_boxes(boxes: list[Box]) -> list[Box]:
+    """``boxes`` with any two merged into their bounding box while that costs less than the
+    two apart (see BOX_OVERHEAD_PIXELS)."""
+    boxes = list(boxes)
+    merging = True
+    while merging:
+        merging = False
+        for first in range(len(boxes)):
+            for second in range(first + 1, len(boxes)):
+                a, b = boxes[first], boxes[second]
+                union = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+                if box_area(union) <= box_area(a) + box_area(b) + BOX_OVERHEAD_PIXELS:
+                    boxes[first] = union
+                    del boxes[second]
+                    merging = True
+                    break
+            if merging:
+                break
+    return boxes
+
+
+def half_value(frame: np.ndarray, kernel: int, rows: slice, columns: slice) -> np.ndarray:
+    """Rows and columns of the half-size value plane of ``frame`` blurred by a ``kernel`` px
+    Gaussian, as the whole-frame route makes it (blur, max channel, 2x2 averages), from the
+    part of the frame they cover."""
+    height, width = frame.shape[:2]
+    reach = kernel // 2  # (the blur's reach: a margin it reads, cut off after it)
+    top, left = max(0, 2 * rows.start - reach), max(0, 2 * columns.start - reach)
+    part = frame[top:min(height, 2 * rows.stop + reach), left:min(width, 2 * columns.stop + reach)]
+    if kernel > 1:
+        part = cv2.GaussianBlur(part, (kernel, kernel), 0)
     value = cv2.max(cv2.max(cv2.extractChannel(part, 0), cv2.extractChannel(part, 1)),
                     cv2.extractChannel(part, 2))
-    value = cv2.GaussianBlur(value, (3, 3), HALF_BLUR_SIGMA)
-    return value[rows.start - top:rows.stop - top, columns.start - left:columns.stop - left]
+    value = value[2 * rows.start - top:2 * rows.stop - top, 2 * columns.start - left:2 * columns.stop - left]
+    return cv2.resize(value, (value.shape[1] // 2, value.shape[0] // 2), interpolation=cv2.INTER_AREA)
 
 
 def source_span(rows: slice, columns: slice, height: int, width: int) -> tuple[slice, slice]:
@@ -126,7 +158,7 @@ def doubled_part(part: np.ndarray, span: tuple[slice, slice], rows: slice, colum
 
 
 class PartEqualiser:
-    """CLAHE of the half-size value plane, computed only on the tiles a part of it needs.
+    """CLAHE of a frame's half-size value plane, computed only on the tiles a part of it needs.
 
     A pixel's CLAHE value depends on the histograms of the (up to four) tiles whose centres
     surround it, so equalising the tiles around a part and one tile more each way gives the
@@ -134,18 +166,20 @@ class PartEqualiser:
     pads them) and parts needing most of the plane are equalised whole, once.
     """
 
-    def __init__(self, clahe: cv2.CLAHE, grid: int, half: np.ndarray):
+    def __init__(self, clahe: cv2.CLAHE, grid: int, frame: np.ndarray, kernel: int):
         self._clahe = clahe
         self._grid = grid
-        self._half = half
-        height, width = half.shape[:2]
+        self._frame = frame
+        self._kernel = kernel
+        height, width = frame.shape[0] // 2, frame.shape[1] // 2
+        self._size = (height, width)
         self._tile = (height // grid, width // grid)
         self._tiled = height % grid == 0 and width % grid == 0
         self._whole: np.ndarray | None = None
 
     def part(self, rows: slice, columns: slice) -> np.ndarray:
         """The CLAHE-equalised value plane's ``rows``, ``columns``."""
-        height, width = self._half.shape[:2]
+        height, width = self._size
         if self._whole is None and self._tiled:
             tile_height, tile_width = self._tile
             tile_rows = slice(max(0, rows.start // tile_height - 1) * tile_height,
@@ -156,12 +190,13 @@ class PartEqualiser:
                      (tile_columns.stop - tile_columns.start) // tile_width)
             if tiles[0] * tiles[1] <= PART_TILES_SHARE * self._grid * self._grid:
                 self._clahe.setTilesGridSize((tiles[1], tiles[0]))
-                equalised = self._clahe.apply(half_value(self._half, tile_rows, tile_columns))
+                equalised = self._clahe.apply(half_value(self._frame, self._kernel, tile_rows, tile_columns))
                 return equalised[rows.start - tile_rows.start:rows.stop - tile_rows.start,
                                  columns.start - tile_columns.start:columns.stop - tile_columns.start]
         if self._whole is None:
             self._clahe.setTilesGridSize((self._grid, self._grid))
-            self._whole = self._clahe.apply(half_value(self._half, slice(0, height), slice(0, width)))
+            self._whole = self._clahe.apply(half_value(self._frame, self._kernel, slice(0, height),
+                                                       slice(0, width)))
         return self._whole[rows, columns]
 
 

@@ -6,7 +6,7 @@ import numpy as np
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.mask import ColourMasker
 from balltrack.services.detector.regions import (PartEqualiser, coarse_boxes, coarse_hue_table,
-                                                 doubled_part, half_size, half_value, regions_apply,
+                                                 doubled_part, half_size, regions_apply,
                                                  source_span)
 from tests.unit.detector.drawing import scene
 
@@ -23,11 +23,15 @@ def test_doubled_part_is_the_part_of_the_doubled_plane():
         assert np.array_equal(doubled_part(small[span], span, rows, columns), doubled[rows, columns])
 
 
-def test_part_equaliser_matches_the_whole_plane_within_rounding():
-    half = half_size(scene([(200.0, 150.0, 20.0), (500.0, 380.0, 35.0)], brightness=0.6))
+def test_part_equaliser_matches_the_whole_frame_route_within_rounding():
+    image = scene([(200.0, 150.0, 20.0), (500.0, 380.0, 35.0)], brightness=0.6)
+    masker = ColourMasker(DetectorConfig())  # clahe 2.0 on an 8x8 grid, blur 5
+    value = cv2.extractChannel(cv2.cvtColor(cv2.GaussianBlur(image, (5, 5), 0), cv2.COLOR_BGR2HSV), 2)
     whole = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(
-        half_value(half, slice(0, half.shape[0]), slice(0, half.shape[1])))
-    equaliser = PartEqualiser(cv2.createCLAHE(clipLimit=2.0), 8, half)
+        cv2.resize(value, (320, 240), interpolation=cv2.INTER_AREA))
+    assert np.array_equal(cv2.resize(whole, (640, 480), interpolation=cv2.INTER_LINEAR),
+                          masker.equalise(value))
+    equaliser = PartEqualiser(cv2.createCLAHE(clipLimit=2.0), 8, image, 5)
     rows, columns = slice(60, 95), slice(85, 120)
     part = equaliser.part(rows, columns)
     # (OpenCV interpolates between tiles in float: a part's weights may round differently)
@@ -50,7 +54,7 @@ def test_coarse_boxes_hold_the_balls_and_nothing_else():
 
 def test_a_frame_mostly_of_ball_colour_is_done_whole():
     config = DetectorConfig()
-    image = scene([(320.0, 240.0, 200.0)])
+    image = scene([(320.0, 240.0, 290.0)])
     assert coarse_boxes(half_size(image), image.shape, coarse_hue_table(config), config) is None
 
 
