@@ -27,7 +27,7 @@ import numpy as np
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
-                                                 doubled_part, grown_box, half_size, regions_apply,
+                                                 doubled_part, grown_box, regions_apply,
                                                  source_span)
 
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
@@ -172,8 +172,7 @@ class ColourMasker:
         (do the whole frame) when the boxes would cover too much of it."""
         config = self.config
         height, width = gained.shape[:2]
-        half = half_size(gained)
-        pending = coarse_boxes(half, gained.shape, self._coarse_hue, config)
+        pending = coarse_boxes(gained, self._coarse_hue, config)
         if pending is None:
             return None
         mask = np.zeros((height, width), np.uint8)
@@ -191,7 +190,7 @@ class ColourMasker:
                 window = compute_window(box, width, height)
                 part_equalised = None  # (without CLAHE, each part's own value plane)
                 if equaliser is not None:
-                    span = source_span(*window, *half.shape[:2])
+                    span = source_span(*window, height // 2, width // 2)
                     part_equalised = doubled_part(equaliser.part(*span), span, *window)
                 part_mask, part_chroma = self._colour_mask(
                     gained[window], gain, config.blur_kernel, config.min_chroma, opening=True,

@@ -1,23 +1,25 @@
 """Regions of interest of the colour mask (steps 2-4 of the detector, see ``mask.py``).
 
 Most of a frame is not ball-coloured, and blurring, converting and cleaning all of it costs
-more than the rest of the detector. So the colour is first looked for on a copy shrunk
-COARSE_STEP times (area averages) with loose thresholds, and steps 2-4 run at full resolution
-only in boxes around what passed: inside a box the mask is the whole frame's, outside it is
+more than the rest of the detector. So the colour is first looked for on every COARSE_STEP-th
+pixel with loose thresholds, and steps 2-4 run at full resolution only in boxes around what
+passed: inside a box the mask is the whole frame's, outside it is
 empty. The one plane that needs the whole frame is the CLAHE-equalised value (its tiles'
 histograms); it is made only on the CLAHE tiles around the boxes.
 """
+
+import math
 
 import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
 
-# The coarse search: the frame shrunk this many times, each side.
+# The coarse search: every this many pixels, each way.
 COARSE_STEP = 4
 # The coarse search lets through hues up to this far outside h_min..h_max and saturations down
-# to this share of s_min: the average of a 4x4 cell that a small or blurred ball only partly
-# covers is paler and mixed with its background.
+# to this share of s_min: it reads the raw frame, and the mask the blurred one. (With these, no
+# mask pixel of 200 renders and 145 photos was outside the boxes.)
 COARSE_HUE_SLACK = 5
 COARSE_SATURATION_SHARE = 0.75
 # Frames at most this wide (px) equalise at full size (see ColourMasker.equalise), frames
@@ -25,7 +27,7 @@ COARSE_SATURATION_SHARE = 0.75
 # are not exactly twice their half size: all are done whole.
 REGIONS_MIN_WIDTH = 321
 REGIONS_MIN_HEIGHT = 128
-# A box reaches this far (px) past the coarse cells that passed.
+# A box reaches this far (px) past the coarse samples that passed (their neighbours included).
 REGION_MARGIN = 8
 # Around a box its mask is computed on this many px more (blur 2 + opening 2 + closing 4), so
 # that inside the box it is the whole frame's.
@@ -34,13 +36,15 @@ COMPUTE_MARGIN = 10
 # for at most MAX_REGION_ROUNDS rounds.
 REGION_GROWTH = 24
 MAX_REGION_ROUNDS = 4
+# More blobs than this among the coarse samples (clutter all over): the whole frame is cheaper.
+MAX_BLOBS = 12
 # Each box costs about as much as steps 2-4 on this many pixels more (the calls' overhead):
 # boxes are merged while their bounding box costs less than they do apart.
 BOX_OVERHEAD_PIXELS = 6000
 # Beyond this share of the frame in boxes, doing the whole frame is cheaper.
-MAX_REGION_SHARE = 0.75
-# A part of the half-size plane needing more than this share of its CLAHE tiles: the whole
-# plane is equalised (once) instead.
+MAX_REGION_SHARE = 0.3
+# Once the parts of the half-size plane have needed more than this share of its CLAHE tiles
+# (in all), the whole plane is equalised, once, instead.
 PART_TILES_SHARE = 0.5
 
 Box = tuple[int, int, int, int]  # left, top, right, bottom (full-size px, right/bottom excluded)
@@ -63,28 +67,23 @@ def regions_apply(shape: tuple[int, ...]) -> bool:
     return width >= REGIONS_MIN_WIDTH and height >= REGIONS_MIN_HEIGHT and width % 2 == height % 2 == 0
 
 
-def half_size(frame: np.ndarray) -> np.ndarray:
-    """The frame at half size (2x2 area averages)."""
+def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfig) -> list[Box] | None:
+    """Boxes holding every pixel of ``frame`` whose colour may pass the mask, found on every
+    COARSE_STEP-th pixel of it; None when they would cover too much of it."""
     height, width = frame.shape[:2]
-    return cv2.resize(frame, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
-
-
-def coarse_boxes(half: np.ndarray, shape: tuple[int, ...], hue_table: np.ndarray,
-                 config: DetectorConfig) -> list[Box] | None:
-    """Boxes holding every pixel of a frame of ``shape`` whose colour may pass the mask, found
-    on its ``half``-size copy shrunk further; None when they would cover too much of it."""
-    height, width = shape[:2]
-    cells = COARSE_STEP // 2
-    small = cv2.resize(half, (half.shape[1] // cells, half.shape[0] // cells), interpolation=cv2.INTER_AREA)
+    # (every 4th pixel: a ball of min_radius 3 px holds one wherever it lies)
+    small = cv2.resize(frame, (width // COARSE_STEP, height // COARSE_STEP), interpolation=cv2.INTER_NEAREST)
     hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
     coarse = cv2.LUT(cv2.extractChannel(hsv, 0), hue_table)
     coarse &= cv2.inRange(cv2.extractChannel(hsv, 1), int(config.s_min * COARSE_SATURATION_SHARE), 255)
     if not cv2.countNonZero(coarse):
         return []
-    # (a ball straddling two cells may pass in neither's neighbour)
+    # (a blob's pixels reach up to a sample spacing past its samples)
     coarse = cv2.dilate(coarse, None)
     # (the outer contours' boxes are the 8-connected blobs' boxes; cheaper than labelling)
     contours, _ = cv2.findContours(coarse, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if len(contours) > MAX_BLOBS:
+        return None  # ball-coloured clutter all over
     rectangles = [cv2.boundingRect(contour) for contour in contours]
     covered = sum(box_width * box_height for _, _, box_width, box_height in rectangles)
     if covered * COARSE_STEP * COARSE_STEP > MAX_REGION_SHARE * width * height:
@@ -157,13 +156,21 @@ def doubled_part(part: np.ndarray, span: tuple[slice, slice], rows: slice, colum
     return doubled[top:top + rows.stop - rows.start, left:left + columns.stop - columns.start]
 
 
+def tile_span(pixels: slice, tile: int, grid: int) -> tuple[int, int]:
+    """First and last pixel (excluded) of the CLAHE tiles whose histograms ``pixels`` of a
+    plane read: a pixel interpolates between the tiles whose centres surround it."""
+    first = max(0, math.floor(pixels.start / tile - 0.5))
+    last = min(grid - 1, math.floor((pixels.stop - 1) / tile - 0.5) + 1)
+    return first * tile, (last + 1) * tile
+
+
 class PartEqualiser:
     """CLAHE of a frame's half-size value plane, computed only on the tiles a part of it needs.
 
     A pixel's CLAHE value depends on the histograms of the (up to four) tiles whose centres
-    surround it, so equalising the tiles around a part and one tile more each way gives the
-    part the whole plane's values. Planes that the tile grid does not divide exactly (OpenCV
-    pads them) and parts needing most of the plane are equalised whole, once.
+    surround it, so equalising those tiles gives a part the whole plane's values. Planes that the tile grid does not divide exactly (OpenCV
+    pads them) are equalised whole, and so is the rest of the frame's parts once they have
+    needed PART_TILES_SHARE of its tiles in all (parts' tiles overlap).
     """
 
     def __init__(self, clahe: cv2.CLAHE, grid: int, frame: np.ndarray, kernel: int):
@@ -176,19 +183,19 @@ class PartEqualiser:
         self._tile = (height // grid, width // grid)
         self._tiled = height % grid == 0 and width % grid == 0
         self._whole: np.ndarray | None = None
+        self._tiles_done = 0
 
     def part(self, rows: slice, columns: slice) -> np.ndarray:
         """The CLAHE-equalised value plane's ``rows``, ``columns``."""
         height, width = self._size
         if self._whole is None and self._tiled:
             tile_height, tile_width = self._tile
-            tile_rows = slice(max(0, rows.start // tile_height - 1) * tile_height,
-                              min(self._grid, -(-rows.stop // tile_height) + 1) * tile_height)
-            tile_columns = slice(max(0, columns.start // tile_width - 1) * tile_width,
-                                 min(self._grid, -(-columns.stop // tile_width) + 1) * tile_width)
+            tile_rows = slice(*tile_span(rows, tile_height, self._grid))
+            tile_columns = slice(*tile_span(columns, tile_width, self._grid))
             tiles = ((tile_rows.stop - tile_rows.start) // tile_height,
                      (tile_columns.stop - tile_columns.start) // tile_width)
-            if tiles[0] * tiles[1] <= PART_TILES_SHARE * self._grid * self._grid:
+            self._tiles_done += tiles[0] * tiles[1]
+            if self._tiles_done <= PART_TILES_SHARE * self._grid * self._grid:
                 self._clahe.setTilesGridSize((tiles[1], tiles[0]))
                 equalised = self._clahe.apply(half_value(self._frame, self._kernel, tile_rows, tile_columns))
                 return equalised[rows.start - tile_rows.start:rows.stop - tile_rows.start,

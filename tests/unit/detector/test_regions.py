@@ -6,7 +6,7 @@ import numpy as np
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.mask import ColourMasker
 from balltrack.services.detector.regions import (PartEqualiser, coarse_boxes, coarse_hue_table,
-                                                 doubled_part, half_size, regions_apply,
+                                                 doubled_part, regions_apply,
                                                  source_span)
 from tests.unit.detector.drawing import scene
 
@@ -43,7 +43,7 @@ def test_part_equaliser_matches_the_whole_frame_route_within_rounding():
 def test_coarse_boxes_hold_the_balls_and_nothing_else():
     config = DetectorConfig()
     image = scene([(200.0, 150.0, 4.0), (500.0, 380.0, 40.0)])
-    boxes = coarse_boxes(half_size(image), image.shape, coarse_hue_table(config), config)
+    boxes = coarse_boxes(image, coarse_hue_table(config), config)
     assert len(boxes) == 2
     for u, v, radius in ((200.0, 150.0, 4.0), (500.0, 380.0, 40.0)):
         assert any(left <= u - radius and right >= u + radius and top <= v - radius
@@ -55,7 +55,7 @@ def test_coarse_boxes_hold_the_balls_and_nothing_else():
 def test_a_frame_mostly_of_ball_colour_is_done_whole():
     config = DetectorConfig()
     image = scene([(320.0, 240.0, 290.0)])
-    assert coarse_boxes(half_size(image), image.shape, coarse_hue_table(config), config) is None
+    assert coarse_boxes(image, coarse_hue_table(config), config) is None
 
 
 def test_regions_apply_to_wide_even_frames_only():
