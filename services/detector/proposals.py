@@ -38,7 +38,16 @@ class FrameSearch:
 
 def mask_blobs(mask: np.ndarray) -> list[np.ndarray]:
     """Outer contours of the colour mask's blobs."""
-    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    # (found in the box around the mask's pixels, with a blank pixel more each way where the
+    # frame has one: OpenCV copies the whole image it is given, most of it blank here)
+    height, width = mask.shape
+    left, top, box_width, box_height = cv2.boundingRect(mask)
+    if not box_width:
+        return []
+    right, bottom = min(width, left + box_width + 1), min(height, top + box_height + 1)
+    left, top = max(0, left - 1), max(0, top - 1)
+    contours, _ = cv2.findContours(mask[top:bottom, left:right], cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_SIMPLE, offset=(left, top))
     return list(contours)
 
 
