@@ -179,9 +179,10 @@ def command_info(args) -> int:
                  f"Messages:  {summary.count}",
                  f"Keys:      {len(summary.channels)}"]
         width = max([len(channel.topic) for channel in summary.channels] + [3])
-        lines.append(f"  {'key':<{width}}  {'type':<12} {'count':>8} {'rate':>10}  encoding")
+        type_width = max([len(channel.message_type) for channel in summary.channels] + [12])
+        lines.append(f"  {'key':<{width}}  {'type':<{type_width}} {'count':>8} {'rate':>10}  encoding")
         for channel in summary.channels:
-            lines.append(f"  {channel.topic:<{width}}  {channel.message_type or '-':<12} "
+            lines.append(f"  {channel.topic:<{width}}  {channel.message_type or '-':<{type_width}} "
                          f"{channel.count:>8} {channel.rate:>8.2f}/s  {channel.message_encoding}")
         for line in lines:
             if not out.line(line):
