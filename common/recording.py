@@ -128,6 +128,7 @@ class RecordedMessage:
     log_time: int
     publish_time: int
     sequence: int
+    message_encoding: str = MESSAGE_ENCODING
 
 
 class Recorder:
@@ -291,7 +292,8 @@ class RecordingFile:
                     topic=channel.topic, key=channel.metadata.get("key", channel.topic),
                     message_type=schema.name if schema is not None else "",
                     payload=bytes(message.data), log_time=message.log_time,
-                    publish_time=message.publish_time, sequence=message.sequence)
+                    publish_time=message.publish_time, sequence=message.sequence,
+                    message_encoding=channel.message_encoding)
         except RecordingError:
             raise
         except Exception as error:  # a corrupt chunk, a bad record: one line, never a traceback
@@ -331,7 +333,7 @@ class RecordingFile:
             if channel is None:
                 channel = by_topic[message.topic] = ChannelCount(
                     topic=message.topic, key=message.key, message_type=message.message_type,
-                    message_encoding=MESSAGE_ENCODING)
+                    message_encoding=message.message_encoding)
                 result.channels.append(channel)
             if count:
                 channel.count += 1

@@ -9,6 +9,11 @@ and counted rather than memory growing without bound.
 
 :func:`play` publishes a recording's payloads, byte for byte, with the recorded timing (log-time
 differences divided by ``rate``) or as fast as possible (``rate`` 0).
+
+With ``foxglove`` (the default when the ``view`` extra is installed) a recording also holds
+Foxglove-typed channels (``deploy/foxglove_messages.py``: /camera/image, /image, /scene, /tf,
+/cmd_vel) made from the valid messages, so Foxglove opens the file directly; the msgpack
+channels stay byte for byte, and only they are played back.
 """
 
 import collections
@@ -20,11 +25,21 @@ from typing import Callable, Iterable
 import zenoh
 
 from balltrack.common.keys import SERVICES, TABLE, Keys, stats_key
-from balltrack.common.recording import Recorder, RecordingFile
+from balltrack.common.messages import MessageError, decode
+from balltrack.common.recording import MESSAGE_ENCODING, Recorder, RecordingFile
 
 # Every key whose messages have a schema: the fixed data keys of the contract, then stats.
 DATA_KEYS = tuple(spec.key for spec in TABLE if "<" not in spec.key and "->" not in spec.message)
 DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
+
+
+def foxglove_converter():
+    """The Foxglove conversions, or None without the foxglove-sdk package (the ``view`` extra)."""
+    try:
+        from balltrack.deploy.foxglove_messages import RECORDED_TYPES, mcap_encoding, recorded_messages
+    except ImportError:
+        return None
+    return RECORDED_TYPES, recorded_messages, mcap_encoding
 
 
 @dataclass
@@ -40,8 +55,14 @@ class Recording:
     ``namespace`` from ``session`` into ``path`` until :meth:`close`."""
 
     def __init__(self, session, path, keys: Iterable[str] = DEFAULT_KEYS, namespace: str = "",
-                 max_queued_bytes: int = 256 << 20, metadata: dict[str, str] | None = None):
+                 max_queued_bytes: int = 256 << 20, metadata: dict[str, str] | None = None,
+                 foxglove: bool | None = None):
         self.keys = Keys(namespace)
+        self._foxglove = foxglove_converter() if foxglove is not False else None
+        if foxglove and self._foxglove is None:
+            raise RuntimeError("Foxglove channels need the foxglove-sdk package "
+                               "(pip install 'balltrack[view]')")
+        self._foxglove_channels: dict[str, int] = {}
         self.recorder = Recorder(path, metadata={"namespace": self.keys.namespace,
                                                  **(metadata or {})})
         self.counts = RecordingCounts()
@@ -71,7 +92,7 @@ class Recording:
             self.counts.received += 1
             self._pending.append((str(sample.key_expr), payload, arrival))
             self._pending_bytes += len(payload)
-            self._changed.notify()
+            self._changed.notify_all()  # the writer, and wait_received
 
     def _write_queued(self) -> None:
         while True:
@@ -86,9 +107,37 @@ class Recording:
             channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace,
                                                     self.keys.message_of(topic))
             self.recorder.write_payload(channel, payload, arrival)
+            if self._foxglove is not None:
+                self._write_foxglove(topic, key, payload, arrival)
             with self._changed:
                 self.counts.written += 1
                 self.counts.per_topic[topic] = self.counts.per_topic.get(topic, 0) + 1
+
+    def wait_received(self, count: int, timeout: float) -> bool:
+        """True once ``count`` messages have arrived (written or queued), False after ``timeout``."""
+        with self._changed:
+            return self._changed.wait_for(lambda: self.counts.received >= count, timeout)
+
+    def _write_foxglove(self, topic: str, key: str, payload: bytes, arrival: int) -> None:
+        recorded_types, recorded_messages, mcap_encoding = self._foxglove
+        message_type = recorded_types.get(key)
+        if message_type is None:
+            return
+        try:
+            message = decode(message_type, payload)
+            converted = recorded_messages(key, message)
+        except MessageError:  # recorded as it came on its msgpack channel; nothing to view
+            return
+        prefix = f"/{self.keys.namespace}" if self.keys.namespace else ""
+        for foxglove_topic, item in converted:
+            schema_name, schema_encoding, schema_data, encoding, data = mcap_encoding(item)
+            channel = self._foxglove_channels.get(prefix + foxglove_topic)
+            if channel is None:
+                channel = self._foxglove_channels[prefix + foxglove_topic] = self.recorder.add_channel(
+                    prefix + foxglove_topic, schema_name, schema_encoding, schema_data, encoding,
+                    {"source": topic})
+            self.recorder.write(channel, data, arrival, message["header"]["stamp"],
+                                message["header"]["seq"])
 
     def close(self) -> RecordingCounts:
         """Stop subscribing, write what is queued, finalise the file; returns the counts."""
@@ -116,8 +165,9 @@ class PlayCounts:
 
 def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> list[str]:
     """The recorded topics to play: all, or those whose topic or key (without the recorded
-    namespace) is in ``wanted``. ValueError names a wanted key the recording lacks."""
-    channels = recording.channels()
+    namespace) is in ``wanted``: balltrack's msgpack channels only (the Foxglove ones are for
+    viewing). ValueError names a wanted key the recording lacks."""
+    channels = [channel for channel in recording.channels() if channel.message_encoding == MESSAGE_ENCODING]
     if not wanted:
         return [channel.topic for channel in channels]
     chosen = []
@@ -141,7 +191,7 @@ def play(session, recording: RecordingFile, stop: threading.Event, rate: float =
     wait). ``namespace`` (when not None) replaces the recorded one. Payloads are put with
     congestion control BLOCK: a recording is replayed whole, a slow link slows the replay.
     """
-    topics = list(topics) if topics is not None else None
+    topics = list(topics) if topics is not None else select_topics(recording, None)
     target = Keys(namespace) if namespace is not None else None
     publishers: dict[str, object] = {}
     counts = PlayCounts()

@@ -2,60 +2,33 @@
 republished for Foxglove (``balltrack view --foxglove``).
 
 A :class:`FoxgloveBridge` subscribes on an open Zenoh session and logs, into a Foxglove context
-(served over WebSocket by ``foxglove.start_server``, or written to MCAP by ``foxglove.open_mcap``):
-
-    /image             CompressedImage (JPEG)   the detector's annotated frame (``image_out``)
-    /scene             SceneUpdate              one sphere per located ball (``detected_ball_3d``,
-                                                camera_optical frame) and the true balls (world)
-    /tf                FrameTransform           world -> base_link from ``sim/ground_truth``
-    /cmd_vel           JSON                     the follower's Twist, for plots
+(served over WebSocket by ``foxglove.start_server``, or written to MCAP by ``foxglove.open_mcap``),
+the channels of ``deploy/foxglove_messages.py``: /image, /scene, /tf and /cmd_vel.
 
 Subscribing to ``image_out`` is what makes the detector draw it, so the viewer costs the
 detector one annotated frame per camera frame while it runs. Zenoh callbacks only decode and
-hand over: JPEG encoding of a raw frame happens on a thread of its own that keeps only the
-newest frame, so a slow viewer drops frames rather than delaying the session's other callbacks.
-Malformed messages are dropped and counted (:attr:`FoxgloveBridge.rejected`).
+hand over: showing (JPEG encoding of a raw frame, logging) happens on a thread of its own that
+keeps only the newest frame and a bounded queue of the rest, so a slow viewer drops (and counts,
+:attr:`Bridge.dropped`) rather than delaying the session's other callbacks. Malformed messages
+are dropped and counted (:attr:`Bridge.rejected`).
 """
 
 import collections
-import math
 import threading
+import time
 
-import cv2
 import foxglove
 import rerun as rr
 from foxglove.channels import CompressedImageChannel, FrameTransformChannel, SceneUpdateChannel
-from foxglove.messages import (Color, CompressedImage, FrameTransform, Pose, Quaternion, SceneEntity,
-                               SceneUpdate, SpherePrimitive, Timestamp, Vector3)
 
 from balltrack.common.images import image_to_bgr
 from balltrack.common.keys import CMD_VEL, DETECTED_BALL_3D, GROUND_TRUTH, IMAGE_OUT, Keys
 from balltrack.common.messages import MessageError, decode
+from balltrack.deploy.foxglove_messages import (CMD_VEL_TOPIC, IMAGE_TOPIC, SCENE_TOPIC, TF_TOPIC, TWIST_SCHEMA,
+                                                compressed_image, jpeg_of, located_scene, robot_transform,
+                                                truth_scene, twist_json)
 
-DETECTED_COLOUR = Color(r=0.8, g=1.0, b=0.2, a=0.9)  # the tennis ball's yellow-green
-TRUE_COLOUR = Color(r=0.3, g=0.6, b=1.0, a=0.4)      # ground truth: translucent blue
-DETECTED_DIAMETER = 0.067  # a tennis ball; Ball3D carries no radius
-
-TWIST_SCHEMA = {
-    "type": "object",
-    "properties": {
-        "stamp": {"type": "integer"},
-        "linear": {"type": "array", "items": {"type": "number"}},
-        "angular": {"type": "array", "items": {"type": "number"}},
-    },
-}
-
-
-def timestamp(nanoseconds: int) -> Timestamp:
-    return Timestamp(nanoseconds // 1_000_000_000, nanoseconds % 1_000_000_000)
-
-
-def yaw_quaternion(yaw: float) -> Quaternion:
-    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
-
-
-def _point(x: float, y: float, z: float) -> Pose:
-    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(w=1.0))
+LAGS_KEPT = 100_000
 
 
 class Bridge:
@@ -63,18 +36,25 @@ class Bridge:
     ``show_*`` method of a subclass (a viewer) until :meth:`close`: ``show_jpeg`` (the annotated
     frame, JPEG bytes), ``show_ball`` (Ball3D), ``show_truth`` (GroundTruth), ``show_twist``."""
 
-    def __init__(self, session, namespace: str = "", jpeg_quality: int = 80):
+    def __init__(self, session, namespace: str = "", jpeg_quality: int = 80, max_queued: int = 256):
         self.keys = Keys(namespace)
         self.jpeg_quality = jpeg_quality
         self.rejected = 0
+        self.dropped = 0  # the viewer was more than max_queued messages behind
         self.handled = 0  # valid messages passed to a show_* method
-        self._newest_frame: dict | None = None
+        self.skipped_frames = 0  # a newer frame came before the viewer had shown this one
+        # Seconds from a message's arrival to the end of its show_* call, the newest LAGS_KEPT.
+        self.lags: collections.deque = collections.deque(maxlen=LAGS_KEPT)
+        # (show method, message, arrival); the newest frame waits apart, only it is shown
+        self._queued: collections.deque = collections.deque()
+        self._max_queued = max_queued
+        self._newest_frame: tuple[dict, float] | None = None
         self._closing = False
-        self._frame_ready = threading.Condition()
-        self._encoder = threading.Thread(target=self._encode_frames, name="view-encoder", daemon=True)
-        self._encoder.start()
+        self._ready = threading.Condition()
+        self._worker = threading.Thread(target=self._show_queued, name="view-worker", daemon=True)
+        self._worker.start()
         self._subscribers = []
-        handlers = {IMAGE_OUT: ("Image", self._on_image), DETECTED_BALL_3D: ("Ball3D", self.show_ball),
+        handlers = {IMAGE_OUT: ("Image", None), DETECTED_BALL_3D: ("Ball3D", self.show_ball),
                     GROUND_TRUTH: ("GroundTruth", self.show_truth), CMD_VEL: ("Twist", self.show_twist)}
         try:
             for key, (message, handler) in handlers.items():
@@ -85,39 +65,54 @@ class Bridge:
             raise
 
     def _decoding(self, message: str, handler):
+        # Zenoh's callback only decodes and queues: a viewer that blocks (Rerun's server waits
+        # for its slowest web viewer) must not hold up the session's other callbacks.
         def on_sample(sample):
+            arrival = time.monotonic()
             try:
                 decoded = decode(message, sample.payload.to_bytes())
             except MessageError:
                 self.rejected += 1
                 return
-            handler(decoded)
-            self.handled += 1
+            with self._ready:
+                if handler is None:
+                    self.skipped_frames += self._newest_frame is not None
+                    self._newest_frame = (decoded, arrival)
+                elif len(self._queued) >= self._max_queued:
+                    self.dropped += 1
+                    return
+                else:
+                    self._queued.append((handler, decoded, arrival))
+                self._ready.notify()
         return on_sample
 
-    def _on_image(self, image: dict) -> None:
-        if image["encoding"] == "jpeg":  # already compressed: passed on as is, no re-encoding
-            self.show_jpeg(image["header"], bytes(image["data"]))
-            return
-        with self._frame_ready:
-            self._newest_frame = image
-            self._frame_ready.notify()
-
-    def _encode_frames(self) -> None:
+    def _show_queued(self) -> None:
         while True:
-            with self._frame_ready:
-                self._frame_ready.wait_for(lambda: self._newest_frame is not None or self._closing)
+            with self._ready:
+                self._ready.wait_for(lambda: self._queued or self._newest_frame is not None or self._closing)
                 if self._closing:
                     return
-                image, self._newest_frame = self._newest_frame, None
+                if self._queued:
+                    handler, message, arrival = self._queued.popleft()
+                else:
+                    (message, arrival), self._newest_frame = self._newest_frame, None
+                    handler = self._show_image
             try:
-                bgr = image_to_bgr(image)
+                handler(message)
             except MessageError:
                 self.rejected += 1
                 continue
-            ok, buffer = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
-            if ok:
-                self.show_jpeg(image["header"], buffer.tobytes())
+            self.handled += 1
+            self.lags.append(time.monotonic() - arrival)
+
+    def _show_image(self, image: dict) -> None:
+        self.show_image(image)
+
+    def show_image(self, image: dict) -> None:
+        """The annotated frame; by default as JPEG bytes to :meth:`show_jpeg`."""
+        jpeg = jpeg_of(image, self.jpeg_quality)  # a JPEG frame passes as it is
+        if jpeg is not None:
+            self.show_jpeg(image["header"], jpeg)
 
     def show_jpeg(self, header: dict, data: bytes) -> None:
         raise NotImplementedError
@@ -135,61 +130,68 @@ class Bridge:
         for subscriber in self._subscribers:
             subscriber.undeclare()
         self._subscribers = []
-        with self._frame_ready:
+        with self._ready:
             self._closing = True
-            self._frame_ready.notify()
-        self._encoder.join(timeout=5)
+            self._ready.notify()
+        self._worker.join(timeout=5)
 
 
 class FoxgloveBridge(Bridge):
-    """Republishes balltrack's keys as Foxglove messages into ``context`` (the SDK's default
-    context when None): served by ``foxglove.start_server``, or written by ``foxglove.open_mcap``."""
+    """Republishes balltrack's keys as Foxglove messages (``deploy/foxglove_messages.py``) into
+    ``context`` (the SDK's default context when None): served by ``foxglove.start_server``, or
+    written by ``foxglove.open_mcap``."""
 
     def __init__(self, session, namespace: str = "", context: foxglove.Context | None = None,
                  jpeg_quality: int = 80):
-        self.image = CompressedImageChannel("/image", context=context)
-        self.scene = SceneUpdateChannel("/scene", context=context)
-        self.transform = FrameTransformChannel("/tf", context=context)
-        self.cmd_vel = foxglove.Channel("/cmd_vel", schema=TWIST_SCHEMA, context=context)
+        self.image = CompressedImageChannel(IMAGE_TOPIC, context=context)
+        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=context)
+        self.transform = FrameTransformChannel(TF_TOPIC, context=context)
+        self.cmd_vel = foxglove.Channel(CMD_VEL_TOPIC, schema=TWIST_SCHEMA, context=context)
         super().__init__(session, namespace, jpeg_quality)
 
     def show_jpeg(self, header: dict, data: bytes) -> None:
-        self.image.log(CompressedImage(timestamp=timestamp(header["stamp"]), frame_id=header["frame_id"],
-                                       data=data, format="jpeg"))
+        self.image.log(compressed_image(header, data))
 
     def show_ball(self, ball: dict) -> None:
-        header = ball["header"]
-        sphere = SpherePrimitive(pose=_point(ball["x"], ball["y"], ball["z"]),
-                                 size=Vector3(x=DETECTED_DIAMETER, y=DETECTED_DIAMETER, z=DETECTED_DIAMETER),
-                                 color=DETECTED_COLOUR)
-        entity = SceneEntity(timestamp=timestamp(header["stamp"]), frame_id=header["frame_id"],
-                             id="detected_ball", spheres=[sphere])
-        self.scene.log(SceneUpdate(entities=[entity]))
+        self.scene.log(located_scene(ball))
 
     def show_truth(self, truth: dict) -> None:
-        stamp, robot = truth["header"]["stamp"], truth["robot"]
-        self.transform.log(FrameTransform(timestamp=timestamp(stamp), parent_frame_id="world",
-                                          child_frame_id="base_link",
-                                          translation=Vector3(x=robot["x"], y=robot["y"], z=0.0),
-                                          rotation=yaw_quaternion(robot["yaw"])))
-        spheres = [SpherePrimitive(pose=_point(*ball["position"]),
-                                   size=Vector3(x=2 * ball["radius"], y=2 * ball["radius"], z=2 * ball["radius"]),
-                                   color=TRUE_COLOUR) for ball in truth["balls"]]
-        entity = SceneEntity(timestamp=timestamp(stamp), frame_id="world", id="true_balls", spheres=spheres)
-        self.scene.log(SceneUpdate(entities=[entity]))
+        self.transform.log(robot_transform(truth))
+        self.scene.log(truth_scene(truth))
 
     def show_twist(self, twist: dict) -> None:
-        self.cmd_vel.log({"stamp": twist["header"]["stamp"], "linear": list(twist["linear"]),
-                          "angular": list(twist["angular"])})
+        self.cmd_vel.log(twist_json(twist))
 
 
 PATH_POINTS = 20_000  # the robot path kept for the line strip (over 10 min at 30 Hz)
 RATE_WINDOW_NS = 1_000_000_000
 
 
+# Plot colours away from the ball's yellow-green, so that colour on screen means the ball.
+SERIES_COLOURS = {"plots/located_balls_hz": (80, 150, 255), "plots/ball_distance_m": (255, 120, 60),
+                  "plots/cmd_vel/linear_x": (230, 60, 200), "plots/cmd_vel/angular_z": (60, 200, 230)}
+
+
+def rerun_blueprint():
+    """The layout: the annotated frame large on the left; the world (true balls, the robot and
+    its path) and the time plots on the right."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial2DView(origin="camera", name="annotated frame"),
+            rrb.Vertical(rrb.Spatial3DView(origin="world", name="world (ground truth)"),
+                         rrb.TimeSeriesView(origin="plots/cmd_vel", name="cmd_vel"),
+                         rrb.TimeSeriesView(origin="plots", contents=["$origin/located_balls_hz",
+                                                                     "$origin/ball_distance_m"],
+                                            name="located balls")),
+            column_shares=[3, 2]),
+        collapse_panels=True)
+
+
 class RerunBridge(Bridge):
     """Logs balltrack's keys into the Rerun ``recording`` on the simulated-time timeline
-    ``sim_time``: the annotated frame (``camera/image``), the true balls and the robot's position
+    ``sim_time``: the annotated frame (``camera/image``, BGR pixels), the true balls and the robot's position
     and path in the world frame (``world/...``, from ground truth), cmd_vel and the rate of
     located balls as time plots (``plots/...``)."""
 
@@ -198,16 +200,20 @@ class RerunBridge(Bridge):
         self._path: collections.deque = collections.deque(maxlen=PATH_POINTS)
         self._located: collections.deque = collections.deque()  # stamps of the last second's balls
         self._lock = threading.Lock()
+        for path, colour in SERIES_COLOURS.items():
+            rr.log(path, rr.SeriesLines(colors=[colour], names=[path.rsplit("/", 1)[1]]), static=True,
+                   recording=recording)
         super().__init__(session, namespace, jpeg_quality)
 
     def _at(self, stamp: int) -> None:
         # Rerun's time is per thread: set it before every log, as callbacks come from several.
         rr.set_time("sim_time", duration=stamp / 1e9, recording=self.recording)
 
-    def show_jpeg(self, header: dict, data: bytes) -> None:
-        self._at(header["stamp"])
-        rr.log("camera/image", rr.EncodedImage(contents=data, media_type="image/jpeg"),
-               recording=self.recording)
+    def show_image(self, image: dict) -> None:
+        # Pixels, not JPEG: the web viewer decodes JPEG in the page, which a browser without a
+        # GPU (software rendering) did not finish for minutes; a 320x240 frame is 230 kB.
+        self._at(image["header"]["stamp"])
+        rr.log("camera/image", rr.Image(image_to_bgr(image), color_model="BGR"), recording=self.recording)
 
     def show_ball(self, ball: dict) -> None:
         stamp = ball["header"]["stamp"]
@@ -228,7 +234,8 @@ class RerunBridge(Bridge):
         self._at(truth["header"]["stamp"])
         if truth["balls"]:
             rr.log("world/balls", rr.Points3D([ball["position"] for ball in truth["balls"]],
-                                              radii=[ball["radius"] for ball in truth["balls"]],
+                                              # a few pixels whatever the zoom: 3 cm is a dot
+                                              radii=rr.Radius.ui_points(8),
                                               colors=[(204, 255, 51)] * len(truth["balls"])),
                    recording=self.recording)
         rr.log("world/robot", rr.Transform3D(translation=path[-1],

@@ -25,7 +25,6 @@ import math
 import random
 import tempfile
 import threading
-import time
 from pathlib import Path
 
 import msgpack
@@ -37,6 +36,7 @@ from balltrack.common.messages import SCHEMAS, decode, encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, progress
+from balltrack.experiments.processes import resident_mb
 from balltrack.services.simulator.control import send_command
 
 NAME = "fuzz"
@@ -196,19 +196,6 @@ class Generator:
 def _label(key: str, is_query: bool) -> str:
     """``camera/camera_info`` is both published and queried: its two rows need two names."""
     return f"{key} (query)" if is_query and key in keys.MESSAGE_OF_KEY else key
-
-
-def resident_mb(pid: int | None) -> float | None:
-    """VmRSS of ``pid`` in MB, from /proc (None when it is gone)."""
-    if pid is None:
-        return None
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        return None
-    return None
 
 
 class Watch:

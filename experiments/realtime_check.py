@@ -27,17 +27,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from balltrack.common.messages import decode  # noqa: E402
 from balltrack.common.session import open_session  # noqa: E402
 from balltrack.deploy.launcher import SERVICES, start_system  # noqa: E402
+from balltrack.experiments.processes import cpu_seconds  # noqa: E402
 
 WARM_UP_STATS = 3  # stats messages (seconds) left out of the averages: start-up costs
-
-
-def cpu_seconds(pid: int | None) -> float:
-    """User + system CPU time of a process so far (Linux /proc), 0 if unavailable."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return 0.0
 
 
 class StatsStream:

@@ -23,22 +23,14 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
+from balltrack.experiments.processes import cpu_seconds
 from balltrack.services.ros2_bridge import convert
-
-TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICKS  # utime, stime
-
 
 def ball3d(index: int) -> bytes:
     return encode("Ball3D", {"header": header(index, index, "camera_optical"),

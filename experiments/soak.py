@@ -34,7 +34,7 @@ from balltrack.common.messages import MessageError, decode
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, quantile
-from balltrack.experiments.fuzz import resident_mb
+from balltrack.experiments.processes import resident_mb
 
 NAME = "soak"
 TITLE = "Soak: the full system chasing a circling ball for many minutes"
@@ -130,9 +130,11 @@ def _soak(system, session, minutes: int) -> list[dict]:
     pids = {name: system.pid(name) for name in PROCESSES}
     rows = []
     try:
-        dropped_before = None
         start = time.monotonic()
-        counters.take()  # the minutes start now; what came during startup is not counted
+        # The minutes start now; what came during startup is not counted (the detector's drop
+        # counter too, if its first stats are in; else minute 1 holds the startup's drops).
+        _, _, stats = counters.take()
+        dropped_before = stats.get("detector", {}).get("dropped", 0)
         print(f"{'min':>3} {'frames':>6} {'dropped':>7} {'p50 ms':>7} {'p99 ms':>7} "
               + " ".join(f"{name[:9]:>9}" for name in PROCESSES) + "  restarts", flush=True)
         for minute in range(1, minutes + 1):
@@ -140,11 +142,8 @@ def _soak(system, session, minutes: int) -> list[dict]:
             time.sleep(max(0.0, start + 60.0 * minute - time.monotonic()))
             frames, latencies, stats = counters.take()
             dropped_now = stats.get("detector", {}).get("dropped")
-            dropped = (None if dropped_now is None or dropped_before is None
-                       else max(0, dropped_now - dropped_before))
-            if dropped_before is None and dropped_now is not None and minute == 1:
-                dropped = dropped_now  # the counter started with the detector, minutes ago at most
-            dropped_before = dropped_now
+            dropped = None if dropped_now is None else max(0, dropped_now - dropped_before)
+            dropped_before = dropped_before if dropped_now is None else dropped_now
             children = system.children()
             row = {
                 "minute": minute, "frames": frames, "dropped": dropped,

@@ -62,7 +62,8 @@ def command_record(args) -> int:
     keys = args.keys or DEFAULT_KEYS
     try:
         try:
-            recording = Recording(session, args.output, keys, args.namespace)
+            recording = Recording(session, args.output, keys, args.namespace,
+                                  foxglove=False if args.no_foxglove else None)
         except RecordingError as error:
             return _fail(args, str(error), 1)
         except Exception as error:  # e.g. a key expression Zenoh refuses
@@ -178,9 +179,10 @@ def command_info(args) -> int:
                  f"Messages:  {summary.count}",
                  f"Keys:      {len(summary.channels)}"]
         width = max([len(channel.topic) for channel in summary.channels] + [3])
-        lines.append(f"  {'key':<{width}}  {'type':<12} {'count':>8} {'rate':>10}  encoding")
+        type_width = max([len(channel.message_type) for channel in summary.channels] + [12])
+        lines.append(f"  {'key':<{width}}  {'type':<{type_width}} {'count':>8} {'rate':>10}  encoding")
         for channel in summary.channels:
-            lines.append(f"  {channel.topic:<{width}}  {channel.message_type or '-':<12} "
+            lines.append(f"  {channel.topic:<{width}}  {channel.message_type or '-':<{type_width}} "
                          f"{channel.count:>8} {channel.rate:>8.2f}/s  {channel.message_encoding}")
         for line in lines:
             if not out.line(line):
@@ -198,6 +200,9 @@ def register(commands) -> None:
                         help="keys or key expressions (default: every data and stats key)")
     record.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
+    record.add_argument("--no-foxglove", action="store_true",
+                        help="only the msgpack channels (default: also Foxglove-typed channels "
+                             "for viewing, when foxglove-sdk is installed)")
     record.add_argument("--progress", type=float, default=0.0, metavar="S",
                         help="print the messages written so far every S seconds on stderr")
     replay = networked(commands, "play", "publish a recording again", command_play)

@@ -24,11 +24,12 @@ def _fail(args, reason: str, status: int) -> int:
 def _serve_rerun(args, session, stop) -> int:
     import rerun as rr
 
-    from balltrack.deploy.view import RerunBridge
+    from balltrack.deploy.view import RerunBridge, rerun_blueprint
 
     recording = rr.RecordingStream("balltrack")
     try:
-        server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit)
+        server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit,
+                                      default_blueprint=rerun_blueprint())
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=server)
     except Exception as error:  # the port taken, an address not ours
         return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
@@ -61,8 +62,12 @@ def _serve_foxglove(args, session, stop) -> int:
 
 
 def _report(bridge) -> int:
-    if bridge.rejected:
-        print(f"balltrack view: {bridge.rejected} malformed message(s) dropped", file=sys.stderr)
+    # One summary line (the viewer_cost experiment reads it): what was shown and how late.
+    lags = sorted(bridge.lags)
+    lag = (f"; arrival -> shown p50 {1000 * lags[len(lags) // 2]:.1f} ms, "
+           f"p99 {1000 * lags[min(len(lags) - 1, int(0.99 * len(lags)))]:.1f} ms" if lags else "")
+    print(f"balltrack view: shown {bridge.handled} messages, {bridge.skipped_frames} older frames skipped, "
+          f"{bridge.dropped} dropped, {bridge.rejected} malformed{lag}", file=sys.stderr)
     return 0
 
 

@@ -12,6 +12,10 @@
    extremely dark frames (gain >= ``dark_gain``: colour 1-2 grey levels above black) steps 2-4
    work on wider averages instead (``dark_blur_kernel``, chroma floor ``dark_min_chroma``, no
    opening).
+
+Steps 2-4 run at full resolution only in regions of interest, boxes around what may be
+ball-coloured on a shrunk copy (see ``regions.py``); frames where such boxes would cover much
+of the frame, small frames and pitch-dark frames are done whole.
 """
 
 import math
@@ -21,6 +25,10 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
+                                                 coarse_boxes, coarse_hue_table, compute_window,
+                                                 doubled_part, grown_box, regions_apply,
+                                                 source_span)
 
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
 EXPLAINED = 128
@@ -96,6 +104,10 @@ class ColourMasker:
                        if config.clahe_clip_limit > 0 else None)
         self._open_kernel = ellipse_kernel(config.open_kernel)
         self._close_kernel = ellipse_kernel(config.close_kernel)
+        self._coarse_hue = coarse_hue_table(config)
+        # (its tile grid changes with the part of the frame it equalises)
+        self._part_clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit)
+                            if config.clahe_clip_limit > 0 else None)
 
     def planes(self, image_bgr: np.ndarray) -> ColourPlanes:
         """The cleaned colour mask of a checked BGR frame, with the planes the checks read."""
@@ -111,8 +123,22 @@ class ColourMasker:
         # and no opening (the averaged mask has no specks, and a small lit cap would not
         # survive it).
         dark = config.dark_gain > 0 and gain >= config.dark_gain
+        if not dark and regions_apply(gained.shape):
+            found = self._mask_in_regions(gained, gain)
+            if found is not None:
+                return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
+                                    reference=min(255.0, reference * gain), dark=dark)
         kernel = config.dark_blur_kernel if dark else config.blur_kernel
         min_chroma = config.dark_min_chroma if dark else config.min_chroma
+        mask, chroma = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
+        return ColourPlanes(mask=mask, frame=gained, gain=gain, chroma=chroma,
+                            reference=min(255.0, reference * gain), dark=dark)
+
+    def _colour_mask(self, gained: np.ndarray, gain: float, kernel: int, min_chroma: float,
+                     opening: bool, equalised: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask and the chroma.
+        ``equalised``: the CLAHE-equalised value plane of the part, None to equalise its own."""
+        config = self.config
         blurred = gained
         if kernel > 1:
             blurred = cv2.GaussianBlur(gained, (kernel, kernel), 0)
@@ -121,7 +147,8 @@ class ColourMasker:
         hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
         # Adaptive histogram equalisation: v_min/v_max apply to locally normalised brightness,
         # so a ball in a shadow keeps its dark side in the mask.
-        equalised = self.equalise(value)
+        if equalised is None:
+            equalised = self.equalise(value)
 
         if config.h_min <= config.h_max:
             mask = cv2.inRange(hue, config.h_min, config.h_max)
@@ -133,12 +160,53 @@ class ColourMasker:
         chroma = cv2.multiply(saturation, value, scale=1.0 / 255.0)
         if min_chroma > 0:
             mask &= cv2.inRange(chroma, min(255, math.ceil(min_chroma * gain - 0.5)), 255)
-        if self._open_kernel is not None and not dark:
+        if self._open_kernel is not None and opening:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open_kernel)
         if self._close_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
-        return ColourPlanes(mask=mask, frame=gained, gain=gain, chroma=chroma,
-                            reference=min(255.0, reference * gain), dark=dark)
+        return mask, chroma
+
+    def _mask_in_regions(self, gained: np.ndarray, gain: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Steps 2-4 only in boxes around what may be ball-coloured (see ``regions.py``), each
+        grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere; None
+        (do the whole frame) when the boxes would cover too much of it."""
+        config = self.config
+        height, width = gained.shape[:2]
+        pending = coarse_boxes(gained, self._coarse_hue, config)
+        if pending is None:
+            return None
+        mask = np.zeros((height, width), np.uint8)
+        chroma = np.zeros((height, width), np.uint8)
+        equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained, config.blur_kernel)
+                     if self._part_clahe is not None else None)
+        done = 0
+        for _round in range(MAX_REGION_ROUNDS):
+            grown = []
+            for box in pending:
+                left, top, right, bottom = box
+                done += (right - left) * (bottom - top)
+                if done > MAX_REGION_SHARE * width * height:
+                    return None
+                window = compute_window(box, width, height)
+                part_equalised = None  # (without CLAHE, each part's own value plane)
+                if equaliser is not None:
+                    span = source_span(*window, height // 2, width // 2)
+                    part_equalised = doubled_part(equaliser.part(*span), span, *window)
+                part_mask, part_chroma = self._colour_mask(
+                    gained[window], gain, config.blur_kernel, config.min_chroma, opening=True,
+                    equalised=part_equalised)
+                inner = (slice(top - window[0].start, bottom - window[0].start),
+                         slice(left - window[1].start, right - window[1].start))
+                piece = part_mask[inner]
+                mask[top:bottom, left:right] |= piece
+                chroma[top:bottom, left:right] = part_chroma[inner]
+                larger = grown_box(box, piece, width, height)
+                if larger is not None:
+                    grown.append(larger)
+            if not grown:
+                return mask, chroma
+            pending = grown
+        return None
 
     def equalise(self, value: np.ndarray) -> np.ndarray:
         """CLAHE of the value channel; on a half-size copy for frames wider than 320 px.

@@ -52,6 +52,17 @@ WIDE_REACH = 1.6
 DARK_WIDE_REACH = 2.1
 
 
+def median(values: np.ndarray) -> float:
+    """``float(np.median(values))`` of a 1-D array without NaNs, a few times faster on the
+    few dozen values of a ray search (np.median's overhead dominates there)."""
+    count = values.size
+    middle = count // 2
+    if count % 2:
+        return float(np.partition(values, middle)[middle])
+    # (the mean of the two middle values, as np.median takes it: in the array's own type)
+    return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].mean())
+
+
 def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
                  directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Colours (rays x radii x 3, float32) sampled bilinearly along rays from (x, y) in
@@ -82,7 +93,7 @@ def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, n
     gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
     gradient[~allowed] = 0.0
     strongest = gradient.max(axis=1)
-    floor = EDGE_FLOOR * float(np.median(strongest)) if rays else 0.0
+    floor = EDGE_FLOOR * median(strongest) if rays else 0.0
     peak = np.zeros((rays, count), bool)
     middle = gradient[:, 1:-1]
     peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
@@ -246,7 +257,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             slope = gradient[np.arange(samples), index][good][keep] / (2 * step)
             width = contrast[good][keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
             fits.append((fitted[:3], np.count_nonzero(keep), float(np.sqrt(np.mean(residual * residual))),
-                         float(np.median(width))))
+                         median(width)))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
         best = None

@@ -55,7 +55,16 @@ class FrameSearch:
 def fill_holes(mask: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     """Outer contours of the mask's blobs, and the mask with each hole filled that is at most
     HOLE_SHARE of its blob's outline area (``mask`` itself when there is none)."""
-    contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+    # (found in the box around the mask's pixels, with a blank pixel more each way where the
+    # frame has one: OpenCV copies the whole image it is given, most of it blank here)
+    height, width = mask.shape
+    left, top, box_width, box_height = cv2.boundingRect(mask)
+    if not box_width:
+        return [], mask
+    right, bottom = min(width, left + box_width + 1), min(height, top + box_height + 1)
+    left, top = max(0, left - 1), max(0, top - 1)
+    contours, hierarchy = cv2.findContours(mask[top:bottom, left:right], cv2.RETR_CCOMP,
+                                           cv2.CHAIN_APPROX_SIMPLE, offset=(left, top))
     if not contours:
         return [], mask
     links = hierarchy[0]  # per contour: next, previous, first child, parent
@@ -72,12 +81,29 @@ def fill_holes(mask: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
 def boundary_points(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Columns and rows (float64, in row order) of the mask's boundary pixels, leaving out
     the frame's border: there the mask's edge is the frame's, not the ball's."""
-    boundary = cv2.subtract(mask, cv2.erode(mask, _BOUNDARY_KERNEL))
-    boundary[0, :] = boundary[-1, :] = 0
-    boundary[:, 0] = boundary[:, -1] = 0
+    height, width = mask.shape
+    # Only the box around the mask's pixels is searched, with a pixel more each way (blank,
+    # or the frame's border), so its erosion is the whole mask's.
+    left, top, box_width, box_height = cv2.boundingRect(mask)
+    if not box_width:
+        return np.zeros(0, np.float64), np.zeros(0, np.float64)
+    right, bottom = min(width, left + box_width + 1), min(height, top + box_height + 1)
+    left, top = max(0, left - 1), max(0, top - 1)
+    part = mask[top:bottom, left:right]
+    boundary = cv2.subtract(part, cv2.erode(part, _BOUNDARY_KERNEL))
+    if top == 0:
+        boundary[0, :] = 0
+    if bottom == height:
+        boundary[-1, :] = 0
+    if left == 0:
+        boundary[:, 0] = 0
+    if right == width:
+        boundary[:, -1] = 0
     points = cv2.findNonZero(boundary)
-    points = np.zeros((0, 2), np.float64) if points is None else points.reshape(-1, 2).astype(np.float64)
-    return points[:, 0].copy(), points[:, 1].copy()
+    if points is None:
+        return np.zeros(0, np.float64), np.zeros(0, np.float64)
+    points = points.reshape(-1, 2).astype(np.float64)
+    return points[:, 0] + left, points[:, 1] + top
 
 
 def frame_search(planes: ColourPlanes, config: DetectorConfig, scale: float,

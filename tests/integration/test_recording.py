@@ -98,15 +98,21 @@ def test_record_writes_what_was_published_and_info_counts_it(router, session, tm
     info = balltrack("info", str(path), "--json")
     assert info.returncode == 0, info.stderr
     summary = json.loads(info.stdout)
-    counts = {item["key"]: (item["type"], item["count"]) for item in summary["keys"]}
+    counts = {item["key"]: (item["type"], item["count"]) for item in summary["keys"]
+              if item["encoding"] == "msgpack"}
     assert counts == {"detected_ball_3d": ("Ball3D", 21), "camera/image_raw": ("Image", 5),
                       "clock": ("Clock", 20), "detector/stats": ("Stats", 1)}
-    assert summary["messages"] == len(sent) and summary["complete"]
+    # beside them, for Foxglove: the valid Ball3D as scenes, the frames as JPEG
+    viewing = {item["topic"]: (item["type"], item["encoding"], item["count"]) for item in summary["keys"]
+               if item["encoding"] != "msgpack"}
+    assert viewing == {"/scene": ("foxglove.SceneUpdate", "protobuf", 20),
+                       "/camera/image": ("foxglove.CompressedImage", "protobuf", 5)}
+    assert summary["messages"] == len(sent) + 25 and summary["complete"]
     table = balltrack("info", str(path))
     assert table.returncode == 0 and "camera/image_raw" in table.stdout, table.stderr
 
     with RecordingFile(path) as recording:
-        recorded = list(recording.messages())
+        recorded = [message for message in recording.messages() if message.message_encoding == "msgpack"]
     for key in publishers:  # per key, in publishing order (keys interleave by arrival)
         mine = [item for item in sent if item[0] == key]
         theirs = [message for message in recorded if message.topic == key]

@@ -8,8 +8,8 @@ import pytest
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, rim_directions
 from balltrack.services.detector.mask import ColourMasker
-from balltrack.services.detector.outline import (crossings, edge_peaks, ray_profiles, shading,
-                                                 silhouette)
+from balltrack.services.detector.outline import (crossings, edge_peaks, median, ray_profiles,
+                                                 shading, silhouette)
 from tests import harness
 from tests.unit.detector.drawing import floor, scene, to_uint8
 
@@ -122,3 +122,11 @@ def test_the_outline_of_a_ball_touching_another():
     x, y, radius = silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
                               [neighbour])
     assert math.hypot(x - first[0], y - first[1]) < 0.5 and abs(radius - first[2]) < 0.9
+
+
+def test_median_is_numpys():
+    generator = np.random.default_rng(3)
+    for count in (1, 2, 3, 36, 37, 90):
+        for dtype in (np.float32, np.float64):
+            values = (generator.random(count) * 50).astype(dtype)
+            assert median(values) == float(np.median(values))

@@ -63,6 +63,31 @@ def test_boundary_points_lie_on_the_rim_in_row_order_without_the_frame_border():
     assert boundary_points(np.zeros(SHAPE, np.uint8))[0].size == 0
 
 
+def test_blobs_are_the_whole_masks_contours():
+    # (they are searched for in the box around the mask's pixels only)
+    mask = disc(SHAPE, 60.0, 50.0, 12.0) | disc(SHAPE, 200.0, 150.0, 25.0)
+    mask[0:10, SHAPE[1] - 30:] = 255  # a blob on the frame's corner
+    expected, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    found = fill_holes(mask)[0]
+    assert len(found) == len(expected) == 3
+    order = lambda contours: sorted(contours, key=lambda contour: cv2.boundingRect(contour))  # noqa: E731
+    assert all(np.array_equal(first, second) for first, second in zip(order(found), order(expected)))
+    assert fill_holes(np.zeros(SHAPE, np.uint8))[0] == []
+
+
+def test_boundary_points_are_the_whole_masks():
+    # (they are searched for in the box around the mask's pixels only)
+    mask = disc(SHAPE, 60.0, 50.0, 12.0) | disc(SHAPE, 200.0, 150.0, 25.0)
+    mask[0:10, SHAPE[1] - 30:] = 255  # a blob on the frame's corner
+    mask[70:75, 100:104] = EXPLAINED
+    boundary = cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8)))
+    boundary[0, :] = boundary[-1, :] = 0
+    boundary[:, 0] = boundary[:, -1] = 0
+    rows, columns = np.nonzero(boundary)
+    boundary_x, boundary_y = boundary_points(mask)
+    assert np.array_equal(boundary_x, columns) and np.array_equal(boundary_y, rows)
+
+
 def test_frame_search_radius_limits():
     mask = np.zeros(SHAPE, np.uint8)
     search = search_of(mask)
