@@ -196,11 +196,13 @@ class BallDetector:
         inscribed discs of what they leave of it (proposals.inscribed_discs); together they
         must cover most of the blob (proposals.CLUSTER_COVER).
         """
+        smallest = CLUSTER_MIN_SIZE * search.small_radius
+        if cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
+            return []  # no room for two members
         # (the spread is judged once the other members are explained: rays into them meet
         # their far edges)
         def member_like(candidate: Candidate, metrics: CandidateMetrics) -> bool:
-            return (candidate.radius >= CLUSTER_MIN_SIZE * search.small_radius
-                    and metrics.mask.fill >= CLUSTER_FILL)
+            return candidate.radius >= smallest and metrics.mask.fill >= CLUSTER_FILL
 
         def completed(members: list[Candidate]) -> list[Candidate]:
             """``members`` and the inscribed discs of what they leave of the blob."""
