@@ -37,16 +37,31 @@ class FollowerConfig:
     # The original blends the first detection into values from before the loss, starting from zero.
     reset_filter_on_reacquire: bool = param(True, "restart the filter from the first detection after a loss")
     keep_target: bool = param(True, "among several balls, keep following the one already chased (nearest "
-                                    "its last position in x and apparent size) instead of whichever looks "
+                                    "its predicted position, of its apparent size) instead of whichever looks "
                                     "largest; false follows `detected_ball` (the largest) as the original "
                                     "node does")
-    target_gate: float = param(0.3, "largest change of normalised x for a ball to count as the target "
-                                    "still (its apparent size must also be within a factor of 1.5)",
+    target_gate: float = param(0.3, "largest distance (normalised image x, y) of a detection from the "
+                                    "target's predicted position for it to count as the target",
                                above=0, high=2)
     # Long enough to ride out a missed frame or two, short enough that a target that jumped (or
     # was replaced) is re-acquired quickly.
     target_hold_secs: float = param(0.3, "how long (s) other balls are ignored after the target was last "
-                                         "matched", low=0)
+                                         "matched or covered by a larger detection", low=0)
+    # Frame to frame a ball's detected size changes by under 5 % in the simulator; two balls
+    # merging into one detection grow it by 5-10 % a frame. Only a merge makes a ball look larger.
+    target_size_ratio: float = param(1.2, "largest apparent size of a detection, relative to the target's "
+                                          "reference size, for it to count as the target alone",
+                                     above=1, high=4)
+    # A ball partly hidden or cut by the image edge looks smaller (in the simulator up to ~15 %).
+    target_shrink_ratio: float = param(1.5, "the target may look smaller than its reference size by up to "
+                                            "this factor", above=1, high=4)
+    # Slow enough that a merge (more than 1/s) is not followed, fast enough for the robot's own
+    # approach (0.1 m/s at 0.5 m: 0.2/s); a faster real approach is held as "covered".
+    target_size_rate: float = param(0.3, "how fast (log of size per s) the target's reference size may "
+                                         "follow its detections", above=0)
+    target_velocity_memory: float = param(0.9, "exponential memory of the target's image velocity (per "
+                                               "matched frame) used to predict its position",
+                                          low=0, below=1)
 
     # Off by default: the paper's node commands only from its timer. On, the command leaves as
     # soon as the detection is in (one frame's latency instead of up to a timer period) while the
