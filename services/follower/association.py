@@ -24,10 +24,12 @@ A frame's detections, while the target is held (matched or covered within ``targ
   larger). The nearest (position distance plus the size's log-ratio) is the target; it updates
   position, velocity and reference size.
 * **covered**: no clean match, but a larger detection's disc contains the predicted position: the
-  target is merged into it or behind a nearer ball. That detection is steered by, the hold goes
-  on, and the position coasts (kept inside the covering disc) instead of following the merged
-  centre, which lies between the balls. When the balls part, the one at the coasted position and
-  of the reference size is the target again.
+  target is merged into it or behind a nearer ball. The hold goes on and the position coasts
+  (kept inside the covering disc) instead of following the merged centre, which lies between
+  the balls; but that detection is not steered by (None), as it is mostly the other ball: the
+  controller keeps its last command, and loses the target after ``rcv_timeout_secs`` as for
+  any absence. When the balls part, the one at the coasted position and of the reference size
+  is the target again.
 * otherwise none: the target is not in this frame, and no other ball replaces it before the hold
   ends. After it, or with no target yet, the largest ball is taken (the paper's choice) and
   starts a new track.
@@ -106,8 +108,8 @@ class TargetAssociation:
         return track.x + track.velocity_x * elapsed, track.y + track.velocity_y * elapsed
 
     def choose(self, balls: list[dict], now: float) -> dict | None:
-        """The detection to steer by among ``balls`` (maps with ``x``, ``z`` and optionally ``y``),
-        or None; updates the track."""
+        """The target's detection among ``balls`` (maps with ``x``, ``z`` and optionally ``y``), or
+        None when it is not in this frame on its own (missed, or covered); updates the track."""
         usable = [ball for ball in balls if math.isfinite(ball["x"]) and math.isfinite(_y(ball))
                   and math.isfinite(ball["z"]) and ball["z"] > 0]
         if not self.holding(now):
@@ -141,10 +143,9 @@ class TargetAssociation:
         covering = [ball for ball in usable if ball["z"] > track.size and distance(ball) <= ball["z"]]
         if not covering:
             return None
-        chosen = min(covering, key=distance)
-        self._coast(chosen, predicted_x, predicted_y, now)
+        self._coast(min(covering, key=distance), predicted_x, predicted_y, now)
         self.last_kind = COVERED
-        return chosen
+        return None
 
     def _follow(self, ball: dict, now: float) -> None:
         track = self.track

@@ -74,13 +74,13 @@ def test_reference_size_follows_an_approach_but_not_a_merge():
     assert tracker.track.size < reference * 1.1
 
 
-def test_a_larger_detection_covering_the_target_holds_it_beyond_the_hold_time():
+def test_a_larger_detection_covering_the_target_holds_it_but_is_not_steered_by():
     tracker = association(target_hold_secs=0.3)
     now = run_target(tracker, 0.1, 0.0, 0.04, 10)
     other = ball(0.6, 0.08)  # a larger ball elsewhere, which the paper's rule would take
     for _ in range(30):  # 1 s behind a nearer ball whose disc contains the target's position
         now += FRAME
-        assert tracker.choose([ball(0.12, 0.09), other], now) == ball(0.12, 0.09)
+        assert tracker.choose([ball(0.12, 0.09), other], now) is None  # not steered by
         assert tracker.last_kind == COVERED
     # The nearer ball moves away: the target is there again, the other large ball is not taken.
     now += FRAME
@@ -104,7 +104,8 @@ def test_two_balls_crossing_in_the_image_the_target_is_kept_after_they_part():
         if abs(target - other) < 2 * size:
             # merged: one detection spanning both
             merged = ball((target + other) / 2, size + abs(target - other) / 2)
-            assert tracker.choose([merged, ball(-0.8, 0.055)], now) == merged
+            tracker.choose([merged, ball(-0.8, 0.055)], now)
+            assert tracker.last_kind in (CLEAN, COVERED)
         else:
             chosen = tracker.choose([ball(other, size), ball(target, size), ball(-0.8, 0.055)], now)
             assert chosen == ball(target, size)
