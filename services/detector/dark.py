@@ -88,11 +88,13 @@ def lit_rim_support(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> flo
     """The share of the rim's *lit* part that is a colour edge (colour just inside, none just
     outside), the rim sampled as ``checks.measure_mask`` does.
 
-    A ball whose unlit side is black has colour out to its outline only along the lit arc: on
-    the dark arc nothing is a colour edge, so the whole rim's support is about the lit share of
-    the outline (a third or less as the light grazes) whatever the ball. Rim samples whose
-    inside is dark (at most DARK_SIDE_LEVEL times as bright as the colour within the disc) are
-    the dark side and left out; the rest must be colour edges as the rim of any ball is.
+    A ball's outline under a distant light is half lit (outline and terminator are great
+    circles of the sphere, crossing at two opposite points), and on the dark half nothing is a
+    colour edge. In a pitch-dark frame the averaged colour fades before the terminator, so it
+    reaches the outline over less than that half and the whole rim's support is a third or so,
+    whatever the ball. Rim samples whose inside is dark (at most DARK_SIDE_LEVEL times as bright
+    as the colour within the disc) are the dark side and left out; the rest must be colour
+    edges as the rim of any ball is.
     """
     height, width = mask.shape
     x, y, radius = ball.x, ball.y, ball.radius
@@ -154,11 +156,15 @@ def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[C
                 or any(circle_overlap(ball, other) >= 0.3 for other in kept)
                 or not dark_side(planes.frame, planes.mask, ball)):
             continue
-        # All the colour inside the outline (no leak past its rim), the rim's lit part a
-        # colour edge.
+        # All the colour inside the outline (no leak past its rim), the rim a colour edge: in
+        # pitch-dark frames its lit part only, as the averaged colour fades well before the
+        # terminator there (elsewhere the colour reaches the outline over about the lit half
+        # of the rim, and the whole rim's support is the stricter test against clutter).
         measured = measure_mask(ball, explained)
+        support = (lit_rim_support(planes.frame, explained, ball) if planes.dark
+                   else measured.support if measured is not None else 0.0)
         if (measured is None or measured.leak > 0.05 or measured.outside > 0.05
-                or lit_rim_support(planes.frame, explained, ball) < config.min_edge_support
+                or support < config.min_edge_support
                 or measured.visible < max(config.min_visible_fraction,
                                           min(1.0, search.small_radius / ball.radius))):
             continue

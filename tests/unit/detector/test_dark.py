@@ -10,7 +10,7 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import dark_around, dark_side, lit_rim_support, second_look
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import ColourMasker
-from balltrack.services.detector.outline import WIDE_REACH
+from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH
 from balltrack.services.detector.proposals import frame_search
 from tests.unit.detector.drawing import TENNIS_BGR, coverage, draw_ball, draw_box, floor, to_uint8
 
@@ -89,16 +89,27 @@ def test_second_look_finds_the_whole_ball_around_its_cap():
     assert metrics.colour == CAP_METRICS.colour
 
 
+def pitch_dark(image):
+    """The frame as a camera sees it with next to no light: colour a grey level or two."""
+    return np.round(image.astype(np.float32) / 80).astype(np.uint8)
+
+
 def test_under_a_grazing_light_only_the_lit_part_of_the_rim_is_a_colour_edge():
-    # The lit cap is the top 30 % of the disc: on the whole rim the colour edge is under
-    # min_edge_support, on its lit part it is complete; the second look finds the ball.
+    # Pitch dark, the lit cap the top 30 % of the disc: on the whole rim the colour edge is
+    # under min_edge_support, on its lit part it is complete.
     config = DetectorConfig()
-    planes = ColourMasker(config).planes(black_side_frame(terminator=0.4))
+    planes = ColourMasker(config).planes(pitch_dark(black_side_frame(terminator=0.4)))
+    assert planes.dark
     ball = Candidate(U, V, RADIUS)
     assert measure_mask(ball, planes.mask).support < config.min_edge_support
     assert lit_rim_support(planes.frame, planes.mask, ball) > 0.9
+
+
+def test_second_look_finds_the_ball_around_its_cap_in_a_pitch_dark_frame():
+    config = DetectorConfig()
+    planes = ColourMasker(config).planes(pitch_dark(black_side_frame()))
     kept = second_look([(lit_cap(planes), CAP_METRICS)], [], planes.mask,
-                       frame_search(planes, config, 1.0), config, WIDE_REACH)
+                       frame_search(planes, config, 1.0), config, DARK_WIDE_REACH)
     assert len(kept) == 1
     assert math.hypot(kept[0].x - U, kept[0].y - V) < 1.0 and abs(kept[0].radius - RADIUS) < 1.0
 
