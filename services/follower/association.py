@@ -11,17 +11,21 @@ So the target is a small track in image coordinates (normalised x, y and apparen
 
 * **predicted position**: the last position plus an image velocity (smoothed over clean matches,
   so the target's own motion and the robot's turning both carry it), at the frame's time;
-* **reference size**: follows the chosen detection's size, but at most ``target_size_rate`` (log
-  per second). A ball's apparent size changes smoothly (frame to frame well under 5 % in the
-  simulator, even while the robot drives); a merge or a nearer ball grows the detection faster,
-  and the reference does not follow it.
+* **reference size**: the chosen detection's size; but while the target is *crowded* (another
+  detection within ``target_gate`` of it in the last ``target_crowd_secs``, or the target
+  covered), it follows at most at ``target_size_rate`` (log per second). A ball's apparent
+  size changes smoothly (frame to frame well under 5 % in the simulator, even while the robot
+  drives); a merge grows the detection faster, and the reference does not follow it. A lone
+  target is left to grow as fast as it does: without another ball near, a larger detection at
+  its position is the target coming closer (the last metres of an approach grow it by more
+  than half a size per second), not a merge.
 
 A frame's detections, while the target is held (matched or covered within ``target_hold_secs``):
 
 * **clean match**: within ``target_gate`` of the predicted position and of a size between the
   reference divided by ``target_shrink_ratio`` (a ball partly hidden or cut by the image edge
-  looks smaller) and the reference times ``target_size_ratio`` (only a merge makes a ball look
-  larger). The nearest (position distance plus the size's log-ratio) is the target; it updates
+  looks smaller) and, when crowded, the reference times ``target_size_ratio`` (only a merge
+  makes a ball look larger; alone, ``target_shrink_ratio`` larger). The nearest (position distance plus the size's log-ratio) is the target; it updates
   position, velocity and reference size.
 * **covered**: no clean match, but a larger detection's disc contains the predicted position: the
   target is merged into it or behind a nearer ball. The hold goes on and the position coasts
@@ -56,6 +60,7 @@ class Track:
     size: float
     time: float       # when x, y were last set
     confirmed: float  # when the target was last matched or covered
+    crowded: float | None = None  # when another detection was last near it (or it was covered)
 
 
 @dataclass(frozen=True)
@@ -68,13 +73,15 @@ class AssociationSettings:
     shrink_ratio: float
     size_rate: float
     velocity_memory: float
+    crowd_secs: float
 
     @classmethod
     def from_config(cls, config) -> "AssociationSettings":
         return cls(gate=config.target_gate, hold_secs=config.target_hold_secs,
                    size_ratio=config.target_size_ratio, shrink_ratio=config.target_shrink_ratio,
                    size_rate=config.target_size_rate,
-                   velocity_memory=config.target_velocity_memory)
+                   velocity_memory=config.target_velocity_memory,
+                   crowd_secs=config.target_crowd_secs)
 
 
 def _y(ball: dict) -> float:
@@ -132,22 +139,27 @@ class TargetAssociation:
         def size_mismatch(ball: dict) -> float:
             return math.log(ball["z"] / track.size)
 
-        clean = [ball for ball in usable
-                 if distance(ball) <= settings.gate
-                 and -math.log(settings.shrink_ratio) <= size_mismatch(ball) <= math.log(settings.size_ratio)]
+        near = [ball for ball in usable if distance(ball) <= settings.gate]
+        if len(near) > 1:
+            track.crowded = now
+        crowded = track.crowded is not None and 0 <= now - track.crowded <= settings.crowd_secs
+        larger = settings.size_ratio if crowded else settings.shrink_ratio
+        clean = [ball for ball in near
+                 if -math.log(settings.shrink_ratio) <= size_mismatch(ball) <= math.log(larger)]
         if clean:
             chosen = min(clean, key=lambda ball: distance(ball) + abs(size_mismatch(ball)))
-            self._follow(chosen, now)
+            self._follow(chosen, now, crowded)
             self.last_kind = CLEAN
             return chosen
         covering = [ball for ball in usable if ball["z"] > track.size and distance(ball) <= ball["z"]]
         if not covering:
             return None
+        track.crowded = now
         self._coast(min(covering, key=distance), predicted_x, predicted_y, now)
         self.last_kind = COVERED
         return None
 
-    def _follow(self, ball: dict, now: float) -> None:
+    def _follow(self, ball: dict, now: float, crowded: bool) -> None:
         track = self.track
         elapsed = now - track.time
         if elapsed > 0:
@@ -155,7 +167,10 @@ class TargetAssociation:
             track.velocity_x = memory * track.velocity_x + (1 - memory) * (ball["x"] - track.x) / elapsed
             track.velocity_y = memory * track.velocity_y + (1 - memory) * (_y(ball) - track.y) / elapsed
         track.x, track.y = ball["x"], _y(ball)
-        self._follow_size(ball["z"], elapsed)
+        if crowded:
+            self._follow_size(ball["z"], elapsed)
+        else:
+            track.size = ball["z"]
         track.time = track.confirmed = now
 
     def _coast(self, ball: dict, predicted_x: float, predicted_y: float, now: float) -> None:
@@ -167,7 +182,7 @@ class TargetAssociation:
         track.time = track.confirmed = now
 
     def _follow_size(self, size: float, elapsed: float) -> None:
-        # Rate-limited, so a real approach is followed (a little late) and a merge is not.
+        # Rate-limited, so that a merge is not followed.
         step = self.settings.size_rate * max(elapsed, 0.0)
         change = min(max(math.log(size / self.track.size), -step), step)
         self.track.size *= math.exp(change)

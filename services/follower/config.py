@@ -50,15 +50,21 @@ class FollowerConfig:
     # Frame to frame a ball's detected size changes by under 5 % in the simulator; two balls
     # merging into one detection grow it by 5-10 % a frame. Only a merge makes a ball look larger.
     target_size_ratio: float = param(1.2, "largest apparent size of a detection, relative to the target's "
-                                          "reference size, for it to count as the target alone",
+                                          "reference size, for it to count as the target alone while "
+                                          "other balls are near it",
                                      above=1, high=4)
     # A ball partly hidden or cut by the image edge looks smaller (in the simulator up to ~15 %).
     target_shrink_ratio: float = param(1.5, "the target may look smaller than its reference size by up to "
                                             "this factor", above=1, high=4)
     # Slow enough that a merge (more than 1/s) is not followed, fast enough for the robot's own
-    # approach (0.1 m/s at 0.5 m: 0.2/s); a faster real approach is held as "covered".
+    # approach from afar (0.1 m/s at 0.5 m: 0.2/s).
     target_size_rate: float = param(0.3, "how fast (log of size per s) the target's reference size may "
-                                         "follow its detections", above=0)
+                                         "follow its detections while other balls are near it", above=0)
+    # A merge needs another ball near the target; the memory bridges frames where that ball is
+    # hidden behind the target before it comes out the other side, merging again.
+    target_crowd_secs: float = param(1.0, "how long (s) after another detection was near the target (within "
+                                          "target_gate) its size is held to target_size_ratio and "
+                                          "target_size_rate", low=0)
     target_velocity_memory: float = param(0.9, "exponential memory of the target's image velocity (per "
                                                "matched frame) used to predict its position",
                                           low=0, below=1)

@@ -50,19 +50,25 @@ def test_predicted_position_follows_the_targets_image_motion():
     assert tracker.last_kind == CLEAN
 
 
-def test_reference_size_follows_an_approach_but_not_a_merge():
+def test_a_lone_target_may_grow_fast_but_a_crowded_one_not():
     tracker = association()
     now = run_target(tracker, 0.0, 0.0, 0.04, 10)
-    # Approaching: 1 % a frame (0.3 per s in log) is followed and stays a clean match.
+    # Alone, in the last metres of an approach: 2 % a frame (0.6 per s in log) is the target.
     size = 0.04
     for _ in range(30):
         now += FRAME
-        size *= math.exp(0.3 * FRAME)
-        tracker.choose([ball(0.0, size)], now)
+        size *= math.exp(0.6 * FRAME)
+        assert tracker.choose([ball(0.0, size)], now) == ball(0.0, size)
         assert tracker.last_kind == CLEAN
-    assert tracker.track.size == pytest.approx(size, rel=0.01)
-    # A merge grows the detection 6 % a frame: within a few frames it is no longer the target
-    # alone, though each frame differs from the last by less than the size ratio.
+    assert tracker.track.size == pytest.approx(size)
+    # Another ball comes near: from then on the reference follows at most target_size_rate...
+    for step in range(10):
+        now += FRAME
+        other = ball(0.25 - 0.01 * step, size)
+        assert tracker.choose([ball(0.0, size), other], now) == ball(0.0, size)
+    # ...so when the two merge into one detection growing 6 % a frame, within a few frames it
+    # is no longer the target alone, though each frame differs from the last by less than the
+    # size ratio.
     reference = tracker.track.size
     kinds = []
     for _ in range(6):
@@ -70,7 +76,7 @@ def test_reference_size_follows_an_approach_but_not_a_merge():
         size *= 1.06
         tracker.choose([ball(0.0, size)], now)
         kinds.append(tracker.last_kind)
-    assert kinds[-1] == COVERED
+    assert kinds[0] == CLEAN and kinds[-1] == COVERED
     assert tracker.track.size < reference * 1.1
 
 
@@ -141,7 +147,8 @@ def test_unusable_detections_are_ignored():
 
 
 @pytest.mark.parametrize("field, value", [("target_size_ratio", 1.0), ("target_shrink_ratio", 0.9),
-                                          ("target_size_rate", 0.0), ("target_velocity_memory", 1.0)])
+                                          ("target_size_rate", 0.0), ("target_velocity_memory", 1.0),
+                                          ("target_crowd_secs", -1.0)])
 def test_association_parameters_are_validated(field, value):
     from balltrack.common.config import ConfigError
 
