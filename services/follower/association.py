@@ -25,8 +25,9 @@ A frame's detections, while the target is held (matched or covered within ``targ
 * **clean match**: within ``target_gate`` of the predicted position and of a size between the
   reference divided by ``target_shrink_ratio`` (a ball partly hidden or cut by the image edge
   looks smaller) and, when crowded, the reference times ``target_size_ratio`` (only a merge
-  makes a ball look larger; alone, ``target_shrink_ratio`` larger). The nearest (position distance plus the size's log-ratio) is the target; it updates
-  position, velocity and reference size.
+  makes a ball look larger; alone, ``target_shrink_ratio`` larger). The nearest (position
+  distance plus the size's log-ratio) is the target; it updates position, velocity and
+  reference size.
 * **covered**: no clean match, but a larger detection's disc contains the predicted position: the
   target is merged into it or behind a nearer ball. The hold goes on and the position coasts
   (kept inside the covering disc) instead of following the merged centre, which lies between

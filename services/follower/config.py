@@ -37,9 +37,9 @@ class FollowerConfig:
     # The original blends the first detection into values from before the loss, starting from zero.
     reset_filter_on_reacquire: bool = param(True, "restart the filter from the first detection after a loss")
     keep_target: bool = param(True, "among several balls, keep following the one already chased (nearest "
-                                    "its predicted position, of its apparent size) instead of whichever looks "
-                                    "largest; false follows `detected_ball` (the largest) as the original "
-                                    "node does")
+                                    "its predicted position, of its apparent size) instead of whichever "
+                                    "looks largest; false follows `detected_ball` (the largest) as the "
+                                    "original node does")
     target_gate: float = param(0.3, "largest distance (normalised image x, y) of a detection from the "
                                     "target's predicted position for it to count as the target",
                                above=0, high=2)
@@ -47,9 +47,11 @@ class FollowerConfig:
     # was replaced) is re-acquired quickly.
     target_hold_secs: float = param(0.3, "how long (s) other balls are ignored after the target was last "
                                          "matched or covered by a larger detection", low=0)
-    # Frame to frame a ball's detected size changes by under 5 % in the simulator; two balls
-    # merging into one detection grow it by 5-10 % a frame. Only a merge makes a ball look larger.
-    target_size_ratio: float = param(1.2, "largest apparent size of a detection, relative to the target's "
+    # Frame to frame a ball's detected size changes by under 3 % (99th percentile) in the
+    # simulator; two balls merging into one detection grow it by 5-10 % a frame, and a blob of
+    # the target with a sliver of a ball behind it is 15-20 % larger. Only a merge makes a ball
+    # look larger.
+    target_size_ratio: float = param(1.1, "largest apparent size of a detection, relative to the target's "
                                           "reference size, for it to count as the target alone while "
                                           "other balls are near it",
                                      above=1, high=4)
