@@ -25,9 +25,8 @@ A frame's detections, while the target is held (matched or covered within ``targ
 * **clean match**: within ``target_gate`` of the predicted position and of a size between the
   reference divided by ``target_shrink_ratio`` (a ball partly hidden or cut by the image edge
   looks smaller) and, when crowded, the reference times ``target_size_ratio`` (only a merge
-  makes a ball look larger; alone, ``target_shrink_ratio`` larger). The nearest (position
-  distance plus the size's log-ratio) is the target; it updates position, velocity and
-  reference size.
+  makes a ball look larger; alone, ``target_shrink_ratio`` larger). The nearest to the
+  predicted position is the target; it updates position, velocity and reference size.
 * **covered**: no clean match, but a larger detection's disc contains the predicted position: the
   target is merged into it or behind a nearer ball. The hold goes on and the position coasts
   (kept inside the covering disc) instead of following the merged centre, which lies between
@@ -148,7 +147,9 @@ class TargetAssociation:
         clean = [ball for ball in near
                  if -math.log(settings.shrink_ratio) <= size_mismatch(ball) <= math.log(larger)]
         if clean:
-            chosen = min(clean, key=lambda ball: distance(ball) + abs(size_mismatch(ball)))
+            # Size only gates: after a merge the reference may still be a little off, while
+            # the predicted position has kept to the target's own motion.
+            chosen = min(clean, key=distance)
             self._follow(chosen, now, crowded)
             self.last_kind = CLEAN
             return chosen
