@@ -12,7 +12,8 @@ cores; the tracking experiment's follower settings) for a fixed time per layout.
 * Target switches: the follower keeps its target among the balls (``keep_target``, its
   default; ``--follower keep_target=false`` steers by the largest detection, ``detected_ball``,
   as in the paper). The target is the ball the chosen detection belongs to; a switch is the target changing
-  to another ball while the previous one is still visible. Goal: none. Changes after the
+  to another ball while the previous one is still visible. Goal: fewer than 0.1 per minute
+  (over the full run's 4 simulated minutes: none). Changes after the
   target left the view are counted separately (they are not switches in the goal's sense).
 
 Example::
@@ -33,6 +34,7 @@ from balltrack.services.simulator.scenario import load_scenario
 NAME = "multiball"
 TITLE = "Several balls: recall of visible balls and target keeping (paper contribution 3)"
 VISIBLE_FRACTION = 0.5
+SWITCHES_GOAL_PER_MINUTE = 0.1  # issue 9, part 4
 
 
 def random_layout(rng, index: int) -> dict:
@@ -120,18 +122,20 @@ def run(options: Options) -> ExperimentResult:
                  "tracking but gives no figures):")
     result.goal("recall", "recall of visible balls (every visible ball in the detector's list)",
                 ">= 95 %", percent(recall), recall is not None and recall >= 0.95)
-    result.goal("switches", "target switches while the target is visible", "0 per minute",
+    result.goal("switches", "target switches while the target is visible",
+                f"< {SWITCHES_GOAL_PER_MINUTE} per minute",
                 f"{per_minute:.2f} per minute ({totals['switches']} in {minutes:.1f} min)",
-                totals["switches"] == 0)
+                per_minute < SWITCHES_GOAL_PER_MINUTE)
     result.compare("multi-ball tracking (contribution 3)", "shown, no figures",
                    f"recall {percent(recall)}, {per_minute:.1f} target switches per minute")
     if events:
         result.notes.append("Switches while the old target was visible (expected image radii): "
                             + "; ".join(events[:8]) + ("; ..." if len(events) > 8 else "") + ".")
     if totals["switches"]:
-        result.notes.append("Remaining switches: the target was lost (occluded or cut by the "
-                            "frame edge, or missed) for longer than the follower's timeout, or "
-                            "another ball came within the target gate.")
+        result.notes.append("Remaining switches: the target was neither matched nor covered by a "
+                            "larger detection (occluded or cut by the frame edge, or missed) for "
+                            "longer than target_hold_secs, or another ball near its predicted "
+                            "position looked more like it.")
     result.seconds = clock.seconds
     return result
 

@@ -5,20 +5,24 @@ Under a light with no ambient, a ball's unlit side is black: its colour is a lit
 is part circle, part shading, which the candidate checks take for a corner or a ragged blob. A
 few rejected candidates with something dark around them (``dark_around``) get a second look:
 if the frame shows an outline around the cap (``outline.silhouette``), with all the colour
-inside it and a dark side within it (``dark_side``), the outline is the ball.
+inside it, a dark side within it (``dark_side``) and the lit part of its rim a colour edge
+(``lit_rim_support``), the outline is the ball.
 
 (The colour mask of extremely dark frames, whose colour is a grey level or two above black, is
 ``mask.py``'s: it switches to wider averages at ``dark_gain``.)
 """
 
 import dataclasses
+import math
 
 import cv2
 import numpy as np
 
 from balltrack.services.detector.checks import CandidateMetrics, measure_mask
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc
+from balltrack.services.detector.geometry import (Candidate, box_around, circle_overlap, disc,
+                                                   rim_directions)
+from balltrack.services.detector.mask import EXPLAINED
 from balltrack.services.detector.outline import silhouette
 from balltrack.services.detector.proposals import FrameSearch
 
@@ -28,6 +32,11 @@ from balltrack.services.detector.proposals import FrameSearch
 DARK_SIDE_ATTEMPTS = 3
 DARK_SIDE_SHARE = 0.15
 DARK_SIDE_LEVEL = 0.5
+# The ring around a rejected candidate where a dark side is looked for, in its radii. In pitch-
+# dark frames the colour is only the brightest part of the lit cap and the ball's far rim lies
+# up to about twice the cap's radius from its centre: there the ring reaches as far as the
+# outline search does (``wide_reach``).
+AROUND_REACH = 1.5
 
 
 def _brightness(patch: np.ndarray) -> np.ndarray:
@@ -52,11 +61,12 @@ def dark_side(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> bool:
     return cv2.mean(brightness, unlit)[0] <= DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
 
 
-def dark_around(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> bool:
-    """Whether at least DARK_SIDE_SHARE of the ring just around ``ball`` (r to 1.5 r) is at
+def dark_around(frame: np.ndarray, mask: np.ndarray, ball: Candidate,
+                reach: float = AROUND_REACH) -> bool:
+    """Whether at least DARK_SIDE_SHARE of the ring around ``ball`` (r to ``reach`` r) is at
     most DARK_SIDE_LEVEL times as bright as the colour inside it: where a dark side may be."""
     height, width = mask.shape
-    outer = 1.5 * ball.radius + 1
+    outer = reach * ball.radius + 1
     box = box_around(ball.x, ball.y, outer, width, height)
     if box is None:
         return False
@@ -72,6 +82,45 @@ def dark_around(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> bool:
     level = DARK_SIDE_LEVEL * cv2.mean(brightness, lit)[0]
     dark = cv2.inRange(brightness, 0, max(0.0, level)) & ring
     return cv2.countNonZero(dark) >= DARK_SIDE_SHARE * ring_count
+
+
+def lit_rim_support(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> float:
+    """The share of the rim's *lit* part that is a colour edge (colour just inside, none just
+    outside), the rim sampled as ``checks.measure_mask`` does.
+
+    A ball's outline under a distant light is half lit (outline and terminator are great
+    circles of the sphere, crossing at two opposite points), and on the dark half nothing is a
+    colour edge. In a pitch-dark frame the averaged colour fades before the terminator, so it
+    reaches the outline over less than that half and the whole rim's support is a third or so,
+    whatever the ball. Rim samples whose inside is dark (at most DARK_SIDE_LEVEL times as bright
+    as the colour within the disc) are the dark side and left out; the rest must be colour
+    edges as the rim of any ball is.
+    """
+    height, width = mask.shape
+    x, y, radius = ball.x, ball.y, ball.radius
+    samples = int(min(96, max(24, 2 * math.pi * radius)))
+    offset = max(1.5, 0.15 * radius)
+    points = np.rint(np.array([[x], [y], [x], [y]])
+                     + np.array([[radius - offset], [radius - offset], [radius + offset],
+                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
+    in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
+    points = points[:, in_frame]
+    box = box_around(x, y, radius, width, height)
+    if box is None or points.shape[1] == 0:
+        return 0.0
+    inside = disc(mask[box].shape, x - box[1].start, y - box[0].start, radius)
+    lit = cv2.inRange(mask[box], 255, 255) & inside
+    if not cv2.countNonZero(lit):
+        return 0.0
+    level = DARK_SIDE_LEVEL * cv2.mean(_brightness(frame[box]), lit)[0]
+    inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
+    inner_brightness = _brightness(frame)[points[1], points[0]]
+    known = (inner != EXPLAINED) & (outer != EXPLAINED)
+    lit_side = known & ((inner == 255) | (inner_brightness > level))
+    if np.count_nonzero(lit_side) < DARK_SIDE_SHARE * np.count_nonzero(known):
+        return 0.0  # (next to no lit rim: nothing to judge the outline by)
+    edges = lit_side & (inner == 255) & (outer != 255)
+    return float(np.count_nonzero(edges)) / float(np.count_nonzero(lit_side))
 
 
 def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[Candidate],
@@ -94,7 +143,8 @@ def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[C
                 or any(circle_overlap(candidate, other) >= 0.3 for other in kept)):
             continue
         # (a cheap look first: is there anything dark around the colour at all?)
-        if not dark_around(planes.frame, planes.mask, candidate):
+        if not dark_around(planes.frame, planes.mask, candidate,
+                           wide_reach if planes.dark else AROUND_REACH):
             continue
         attempts += 1
         outline = silhouette(planes.frame, planes.mask, planes.gain, planes.reference,
@@ -106,10 +156,15 @@ def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[C
                 or any(circle_overlap(ball, other) >= 0.3 for other in kept)
                 or not dark_side(planes.frame, planes.mask, ball)):
             continue
-        # All the colour inside the outline (no leak past its rim), the rim a colour edge.
+        # All the colour inside the outline (no leak past its rim), the rim a colour edge: in
+        # pitch-dark frames its lit part only, as the averaged colour fades well before the
+        # terminator there (elsewhere the colour reaches the outline over about the lit half
+        # of the rim, and the whole rim's support is the stricter test against clutter).
         measured = measure_mask(ball, explained)
+        support = (lit_rim_support(planes.frame, explained, ball) if planes.dark
+                   else measured.support if measured is not None else 0.0)
         if (measured is None or measured.leak > 0.05 or measured.outside > 0.05
-                or measured.support < config.min_edge_support
+                or support < config.min_edge_support
                 or measured.visible < max(config.min_visible_fraction,
                                           min(1.0, search.small_radius / ball.radius))):
             continue

@@ -37,16 +37,39 @@ class FollowerConfig:
     # The original blends the first detection into values from before the loss, starting from zero.
     reset_filter_on_reacquire: bool = param(True, "restart the filter from the first detection after a loss")
     keep_target: bool = param(True, "among several balls, keep following the one already chased (nearest "
-                                    "its last position in x and apparent size) instead of whichever looks "
-                                    "largest; false follows `detected_ball` (the largest) as the original "
-                                    "node does")
-    target_gate: float = param(0.3, "largest change of normalised x for a ball to count as the target "
-                                    "still (its apparent size must also be within a factor of 1.5)",
+                                    "its predicted position, of its apparent size) instead of whichever "
+                                    "looks largest; false follows `detected_ball` (the largest) as the "
+                                    "original node does")
+    target_gate: float = param(0.3, "largest distance (normalised image x, y) of a detection from the "
+                                    "target's predicted position for it to count as the target",
                                above=0, high=2)
     # Long enough to ride out a missed frame or two, short enough that a target that jumped (or
     # was replaced) is re-acquired quickly.
     target_hold_secs: float = param(0.3, "how long (s) other balls are ignored after the target was last "
-                                         "matched", low=0)
+                                         "matched or covered by a larger detection", low=0)
+    # Frame to frame a ball's detected size changes by under 3 % (99th percentile) in the
+    # simulator; two balls merging into one detection grow it by 5-10 % a frame, and a blob of
+    # the target with a sliver of a ball behind it is 15-20 % larger. Only a merge makes a ball
+    # look larger.
+    target_size_ratio: float = param(1.1, "largest apparent size of a detection, relative to the target's "
+                                          "reference size, for it to count as the target alone while "
+                                          "other balls are near it",
+                                     above=1, high=4)
+    # A ball partly hidden or cut by the image edge looks smaller (in the simulator up to ~15 %).
+    target_shrink_ratio: float = param(1.5, "the target may look smaller than its reference size by up to "
+                                            "this factor", above=1, high=4)
+    # Slow enough that a merge (more than 1/s) is not followed, fast enough for the robot's own
+    # approach from afar (0.1 m/s at 0.5 m: 0.2/s).
+    target_size_rate: float = param(0.3, "how fast (log of size per s) the target's reference size may "
+                                         "follow its detections while other balls are near it", above=0)
+    # A merge needs another ball near the target; the memory bridges frames where that ball is
+    # hidden behind the target before it comes out the other side, merging again.
+    target_crowd_secs: float = param(1.0, "how long (s) after another detection was near the target (within "
+                                          "target_gate) its size is held to target_size_ratio and "
+                                          "target_size_rate", low=0)
+    target_velocity_memory: float = param(0.9, "exponential memory of the target's image velocity (per "
+                                               "matched frame) used to predict its position",
+                                          low=0, below=1)
 
     # Off by default: the paper's node commands only from its timer. On, the command leaves as
     # soon as the detection is in (one frame's latency instead of up to a timer period) while the

@@ -42,6 +42,7 @@ Decisions beyond the original node:
 import math
 from dataclasses import dataclass
 
+from balltrack.services.follower.association import AssociationSettings, TargetAssociation
 from balltrack.services.follower.config import FollowerConfig
 
 CHASE = "chase"
@@ -64,6 +65,7 @@ class FollowerController:
 
     def __init__(self, config: FollowerConfig):
         self._config = config
+        self._association = TargetAssociation(AssociationSettings.from_config(config))
         self.reset()
 
     @property
@@ -91,11 +93,17 @@ class FollowerController:
         self._target_size = 0.0
         self._last_seen: float | None = None
         self._last_x: float | None = None
-        self._last_size: float | None = None
+        self._association.reset()
+
+    @property
+    def association(self) -> TargetAssociation:
+        """The target's track among several balls (used by ``choose``)."""
+        return self._association
 
     def update_config(self, config: FollowerConfig) -> None:
         """Use new parameters from the next call on; the filter and timing state are kept."""
         self._config = config
+        self._association.settings = AssociationSettings.from_config(config)
 
     def tracking(self, now: float) -> bool:
         """Whether a detection younger than ``rcv_timeout_secs`` has been received by ``now``."""
@@ -117,32 +125,19 @@ class FollowerController:
             self._target_size = self._target_size * keep + size * (1.0 - keep)
         self._last_seen = now
         self._last_x = x
-        self._last_size = size
         return True
 
     def choose(self, balls: list[dict], now: float) -> dict | None:
-        """The ball to follow among one frame's detections (maps with ``x`` and ``z``).
+        """The ball to follow among one frame's detections (maps with ``x``, ``z`` and usually
+        ``y``), or None when the target is not in this frame and is still held.
 
-        While tracking, the ball nearest the target's last position (distance in x plus the
-        log-ratio of apparent sizes) if it lies within ``target_gate`` in x and within a factor
-        of 1.5 in size, else None: the target is not in this frame, and another ball is not
-        taken for it, until ``target_hold_secs`` have passed since the target was last seen.
-        When not tracking, or after the hold, the largest ball (the paper's choice)."""
-        usable = [ball for ball in balls if math.isfinite(ball["x"]) and ball["z"] > 0]
-        if not usable:
-            return None
-        holding = (self.tracking(now) and self._last_x is not None and self._last_size
-                   and now - self._last_seen <= self._config.target_hold_secs)
-        if not holding:
-            return max(usable, key=lambda ball: ball["z"])
-
-        def mismatch(ball: dict) -> float:
-            return abs(ball["x"] - self._last_x) + abs(math.log(ball["z"] / self._last_size))
-
-        candidates = [ball for ball in usable
-                      if abs(ball["x"] - self._last_x) <= self._config.target_gate
-                      and abs(math.log(ball["z"] / self._last_size)) <= math.log(1.5)]
-        return min(candidates, key=mismatch) if candidates else None
+        The target's track (services/follower/association.py) predicts where it is and how
+        large it looks; another ball replaces it only once it has been neither matched nor
+        covered for ``target_hold_secs``, or after a loss. With no target, the largest ball (the
+        paper's choice)."""
+        if not self.tracking(now):
+            self._association.reset()  # lost (searching): nothing to hold
+        return self._association.choose(balls, now)
 
     def tick(self, now: float) -> Command:
         """The command for time ``now`` (called by the ``rate_hz`` timer)."""

@@ -277,12 +277,21 @@ def test_choose_takes_the_largest_until_tracking_then_keeps_the_target():
     assert controller.choose([_ball(-0.3, 0.2)], 5.0) == _ball(-0.3, 0.2)
 
 
-def test_choose_rejects_balls_of_very_different_size_near_the_target():
+def test_choose_rejects_balls_of_very_different_size_beside_the_target():
     controller = FollowerController(FollowerConfig())
+    assert controller.choose([_ball(0.0, 0.05)], 0.0) == _ball(0.0, 0.05)
     controller.on_detection(0.0, 0.05, 0.0)
-    assert controller.choose([_ball(0.05, 0.2)], 0.1) is None       # 4x larger: another ball
+    assert controller.choose([_ball(0.25, 0.2)], 0.1) is None       # 4x larger: another ball
     assert controller.choose([_ball(0.05, 0.06)], 0.1) == _ball(0.05, 0.06)
     assert controller.choose([], 0.1) is None
+
+
+def test_choose_forgets_the_target_once_the_controller_lost_it():
+    controller = FollowerController(FollowerConfig(target_hold_secs=5.0))
+    assert controller.choose([_ball(0.0, 0.05)], 0.0) == _ball(0.0, 0.05)
+    controller.on_detection(0.0, 0.05, 0.0)
+    # Searching after rcv_timeout_secs: nothing is held, whatever the hold time.
+    assert controller.choose([_ball(0.8, 0.2)], 1.5) == _ball(0.8, 0.2)
 
 
 def test_target_gate_is_validated():

@@ -4,12 +4,13 @@ import math
 
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, ColourMetrics, MaskMetrics
+from balltrack.services.detector.checks import (CandidateMetrics, ColourMetrics, MaskMetrics,
+                                                measure_mask)
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.dark import dark_around, dark_side, second_look
+from balltrack.services.detector.dark import dark_around, dark_side, lit_rim_support, second_look
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import ColourMasker
-from balltrack.services.detector.outline import WIDE_REACH
+from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH
 from balltrack.services.detector.proposals import frame_search
 from tests.unit.detector.drawing import TENNIS_BGR, coverage, draw_ball, draw_box, floor, to_uint8
 
@@ -20,12 +21,13 @@ CAP_METRICS = CandidateMetrics(
     ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=100.0, colour_hue=36.0), size=4.0)
 
 
-def black_side_frame():
-    """A ball whose lower half is in black shadow (a light from above, no ambient) on a lit
-    grey floor: its colour is a half-disc cap."""
+def black_side_frame(terminator: float = 0.0):
+    """A ball whose lower part is in black shadow (a light from above, no ambient) on a lit
+    grey floor: its colour is a cap, above ``terminator`` radii over the centre (0: a half-disc;
+    more as the light grazes)."""
     image = floor(320, 240)
     rows = np.mgrid[0:240, 0:320][0].astype(np.float32)
-    colour = np.where((rows < V)[..., None], np.array(TENNIS_BGR, np.float32), 4.0)
+    colour = np.where((rows < V - terminator * RADIUS)[..., None], np.array(TENNIS_BGR, np.float32), 4.0)
     cover = coverage(image.shape, U, V, RADIUS)[..., None]
     return to_uint8(image * (1.0 - cover) + colour * cover)
 
@@ -85,6 +87,42 @@ def test_second_look_finds_the_whole_ball_around_its_cap():
     [(entry, metrics, score)] = judged
     assert entry is ball and metrics.dark_side and score == ball.score
     assert metrics.colour == CAP_METRICS.colour
+
+
+def pitch_dark(image):
+    """The frame as a camera sees it with next to no light: colour a grey level or two."""
+    return np.round(image.astype(np.float32) / 80).astype(np.uint8)
+
+
+def test_under_a_grazing_light_only_the_lit_part_of_the_rim_is_a_colour_edge():
+    # Pitch dark, the lit cap the top 30 % of the disc: on the whole rim the colour edge is
+    # under min_edge_support, on its lit part it is complete.
+    config = DetectorConfig()
+    planes = ColourMasker(config).planes(pitch_dark(black_side_frame(terminator=0.4)))
+    assert planes.dark
+    ball = Candidate(U, V, RADIUS)
+    assert measure_mask(ball, planes.mask).support < config.min_edge_support
+    assert lit_rim_support(planes.frame, planes.mask, ball) > 0.9
+
+
+def test_second_look_finds_the_ball_around_its_cap_in_a_pitch_dark_frame():
+    config = DetectorConfig()
+    planes = ColourMasker(config).planes(pitch_dark(black_side_frame()))
+    kept = second_look([(lit_cap(planes), CAP_METRICS)], [], planes.mask,
+                       frame_search(planes, config, 1.0), config, DARK_WIDE_REACH)
+    assert len(kept) == 1
+    assert math.hypot(kept[0].x - U, kept[0].y - V) < 1.0 and abs(kept[0].radius - RADIUS) < 1.0
+
+
+def test_colour_that_does_not_reach_the_outline_is_no_lit_rim():
+    # a colour spot inside a black disc: the disc's rim is all dark inside, nothing to judge
+    image = floor(320, 240)
+    dark_disc = coverage(image.shape, U, V, RADIUS)[..., None]
+    image = image * (1.0 - dark_disc) + 4.0 * dark_disc
+    spot = coverage(image.shape, U, V - 12, 10.0)[..., None]
+    image = to_uint8(image * (1.0 - spot) + np.array(TENNIS_BGR, np.float32) * spot)
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    assert lit_rim_support(planes.frame, planes.mask, Candidate(U, V, RADIUS)) == 0.0
 
 
 def test_second_look_passes_over_dull_overlapping_and_surplus_candidates():
