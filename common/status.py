@@ -6,15 +6,28 @@ from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
 
 
+# A liveliness query sometimes comes back empty at once although tokens are alive (Zenoh 1.10,
+# most often the first query of a fresh session): an empty answer is asked again. When nothing
+# is alive the router answers at once too, so the retries cost little.
+EMPTY_RETRIES = 3
+
+
+def liveliness_keys(session, key_expression: str, timeout: float) -> set[str]:
+    """The keys of the liveliness tokens alive under ``key_expression``."""
+    for _ in range(EMPTY_RETRIES):
+        found = {str(reply.ok.key_expr) for reply in session.liveliness().get(key_expression, timeout=timeout)
+                 if reply.ok is not None}
+        if found:
+            return found
+    return set()
+
+
 def service_status(session, namespace: str = "", timeout: float = 3.0,
                    stats_wait: float = 1.5) -> tuple[set[str], dict[str, dict]]:
     """(names of the services alive, latest Stats per service). Stats come at 1 Hz, so after
     the liveliness query this waits up to ``timeout + stats_wait`` for one from each."""
     keys = Keys(namespace)
-    alive: set[str] = set()
-    for reply in session.liveliness().get(keys("alive/*"), timeout=timeout):
-        if reply.ok is not None:
-            alive.add(keys.strip(str(reply.ok.key_expr)).split("/", 1)[1])
+    alive = {keys.strip(key).split("/", 1)[1] for key in liveliness_keys(session, keys("alive/*"), timeout)}
     stats: dict[str, dict] = {}
     complete = threading.Event()
 

@@ -34,6 +34,7 @@ from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.messages import SCHEMAS, decode, encode, header
 from balltrack.common.session import open_session
+from balltrack.common.status import liveliness_keys
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, progress
 from balltrack.experiments.processes import resident_mb
@@ -241,11 +242,7 @@ def read_config(session, service: str) -> dict | None:
 
 
 def alive_tokens(session) -> set[str]:
-    names = set()
-    for reply in session.liveliness().get("alive/*", timeout=5.0):
-        if reply.ok is not None:
-            names.add(str(reply.ok.key_expr).split("/", 1)[1])
-    return names
+    return {key.split("/", 1)[1] for key in liveliness_keys(session, "alive/*", timeout=5.0)}
 
 
 def run(options: Options) -> ExperimentResult:

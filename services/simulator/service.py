@@ -35,6 +35,7 @@ from balltrack.common.images import bgr_to_message
 from balltrack.common.config import ConfigError
 from balltrack.common.messages import MessageError, decode, encode, header, shorten
 from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
 from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
@@ -188,9 +189,8 @@ def build(service: ServiceContext):
         return next_info
 
     def loop(context: ServiceContext) -> None:
-        for reply in context.session.liveliness().get(alive_keys, timeout=2.0):  # up before frame 1
-            if reply.ok is not None:
-                on_token(reply.ok.key_expr, True)
+        for key in liveliness_keys(context.session, alive_keys, timeout=2.0):  # up before frame 1
+            on_token(key, True)
         next_info, next_log = 0.0, time.monotonic() + 5.0
         try:
             while not context.stop.is_set():

@@ -340,11 +340,16 @@ class TestChase:
         braking = abs(direction) / simulator["max_angular_accel"]
         chase.truths.wait_for(lambda items: seconds(items[-1][1]) > last_seen + timeout + braking + 0.5,
                               120, "ground truth well past the safety stop")
-        last_command = max(command["time"] for command in chase.commands.messages) / 1e9
+        times = sorted(command["time"] for command in chase.commands.messages)
+        last_command = times[-1] / 1e9
         assert last_command == last_seen, "a command arrived after the follower's death was seen"
+        # The follower's very last command, put as it shuts down, is not always applied by the
+        # simulator (seen under load: braking from the one before); the robot must hold at
+        # least until that one's timeout, and be still at most the braking after the last's.
+        applied_at_least = times[-2] / 1e9
         truths = [truth for truth in chase.truths.messages if seconds(truth) >= last_command - 0.2]
         pairs = list(zip(truths, truths[1:]))
-        holding = [moved(a, b) for a, b in pairs if seconds(b) <= last_command + timeout]
+        holding = [moved(a, b) for a, b in pairs if seconds(b) <= applied_at_least + timeout]
         stopped_at = next((seconds(a) for a, b in pairs if seconds(a) > last_command
                            and all(moved(c, d) < 1e-4 for c, d in pairs if seconds(c) >= seconds(a))),
                           None)
@@ -353,10 +358,12 @@ class TestChase:
                f"({(stopped_at or 0) - last_command:.3f} s after the last command)")
         assert holding and min(holding) > 0.5 * abs(direction) * PERIOD, "stopped before cmd_timeout"
         # Braking within a frame of cmd_timeout: each frame moves less than the one before.
-        braking_from = last_command + timeout + PERIOD - 1e-6
-        slowing = [moved(a, b) for a, b in pairs if seconds(a) >= braking_from and moved(a, b) >= 1e-4]
-        assert all(later < earlier for earlier, later in zip(slowing, slowing[1:])), slowing
-        assert slowing and slowing[0] < min(holding), "not braking a frame after cmd_timeout"
+        braking_from = applied_at_least + timeout + PERIOD - 1e-6
+        slowing = [(seconds(a), moved(a, b)) for a, b in pairs
+                   if seconds(a) >= braking_from and 1e-4 <= moved(a, b) < min(holding) - 1e-6]
+        assert slowing and slowing[0][0] <= last_command + timeout + PERIOD + 1e-6, \
+            f"not braking a frame after cmd_timeout: {slowing}"
+        assert all(later < earlier for (_, earlier), (_, later) in zip(slowing, slowing[1:])), slowing
         # Still once braked: from cmd_timeout + the braking time + the frame in which braking
         # ends + a frame for the base's velocity servo to settle.
         bound = last_command + timeout + braking + 2 * PERIOD + 1e-6
