@@ -47,8 +47,9 @@ def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius:
         ux, uy = dx / distance, dy / distance
         residual = distance - radius
         # normal equations of the Jacobian (-ux, -uy, -1)
-        normal = np.array([[ux @ ux, ux @ uy, ux.sum()], [ux @ uy, uy @ uy, uy.sum()],
-                           [ux.sum(), uy.sum(), float(ux.size)]])
+        cross, sum_x, sum_y = ux @ uy, ux.sum(), uy.sum()
+        normal = np.array([[ux @ ux, cross, sum_x], [cross, uy @ uy, sum_y],
+                           [sum_x, sum_y, float(ux.size)]])
         gradient = np.array([ux @ residual, uy @ residual, residual.sum()])
         try:
             delta = np.linalg.solve(normal, gradient)

@@ -60,7 +60,8 @@ def median(values: np.ndarray) -> float:
     if count % 2:
         return float(np.partition(values, middle)[middle])
     # (the mean of the two middle values, as np.median takes it: in the array's own type)
-    return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].mean())
+    # (sum over count is what ndarray.mean computes, without its wrapper's overhead)
+    return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].sum() / 2)
 
 
 def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
@@ -71,16 +72,19 @@ def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
     map_y = (y + directions[1][:, None] * radii[None, :]).astype(np.float32)
     height, width = patch.shape[:2]
     values = cv2.remap(patch, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    enter = np.full(directions.shape[1], -np.inf)
-    leave = np.full(directions.shape[1], np.inf)
-    for position, direction, size in ((x, directions[0], width), (y, directions[1], height)):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            low, high = (0.0 - position) / direction, (size - 1.0 - position) / direction
-        flat = np.abs(direction) < 1e-9
-        low = np.where(flat, np.where(0.0 <= position <= size - 1.0, -np.inf, np.inf), low)
-        high = np.where(flat, np.where(0.0 <= position <= size - 1.0, np.inf, -np.inf), high)
-        enter = np.maximum(enter, np.minimum(low, high))
-        leave = np.minimum(leave, np.maximum(low, high))
+    # Both axes at once (rows x, y): where each ray crosses the patch's first and last pixel.
+    position = np.array([[x], [y]])
+    inside = np.array([[0.0 <= x <= width - 1.0], [0.0 <= y <= height - 1.0]])
+    axis_directions = directions[:2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        low = (0.0 - position) / axis_directions
+        high = (np.array([[width - 1.0 - x], [height - 1.0 - y]])) / axis_directions
+    # (a ray parallel to an axis crosses neither of its sides: all or none of it is inside)
+    flat = np.abs(axis_directions) < 1e-9
+    low = np.where(flat, np.where(inside, -np.inf, np.inf), low)
+    high = np.where(flat, np.where(inside, np.inf, -np.inf), high)
+    enter = np.minimum(low, high).max(axis=0)
+    leave = np.maximum(low, high).min(axis=0)
     return values.reshape(map_x.shape + (-1,)), enter, leave
 
 
@@ -91,7 +95,8 @@ def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, n
     difference = profiles[:, 2:] - profiles[:, :-2]
     gradient = np.zeros((rays, count), np.float32)
     gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
-    gradient[~allowed] = 0.0
+    # (the gradient is finite and not negative: multiplying by False gives exactly 0)
+    gradient *= allowed
     strongest = gradient.max(axis=1)
     floor = EDGE_FLOOR * median(strongest) if rays else 0.0
     peak = np.zeros((rays, count), bool)
@@ -118,16 +123,16 @@ def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: n
     return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
 
 
-def crossings(profiles: np.ndarray, index: np.ndarray,
+def crossings(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray,
               half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-sample position (in samples) of the 50 % crossing between the levels ``half``
-    samples inside and outside each ray's edge ``index``, whether it is well defined, and the
-    contrast between those levels."""
-    rays, count = profiles.shape[:2]
-    rows = np.arange(rays)
+    samples inside and outside the edge ``index`` of each of ``rays``, whether it is well
+    defined, and the contrast between those levels."""
+    count = profiles.shape[1]
     offsets = np.arange(-half, half + 1)
-    window = np.clip(index[:, None] + offsets[None, :], 0, count - 1)
-    values = profiles[rows[:, None], window]                      # rays x (2 half + 1) x 3
+    # (np.minimum/np.maximum: np.clip's wrapper costs more than the clipping of a few dozen rays)
+    window = np.minimum(np.maximum(index[:, None] + offsets[None, :], 0), count - 1)
+    values = profiles[rays[:, None], window]                      # rays x (2 half + 1) x 3
     level_in, level_out = values[:, 0], values[:, -1]
     contrast = level_in - level_out
     norm = np.einsum("ij,ij->i", contrast, contrast)
@@ -136,9 +141,10 @@ def crossings(profiles: np.ndarray, index: np.ndarray,
     above = share >= 0.5
     # the outermost sample still at least half way to the inside level, and the next one
     last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
+    rows = np.arange(rays.size)
     s0, s1 = share[rows, last], share[rows, last + 1]
     fraction = np.where(s0 - s1 > 1e-6, (s0 - 0.5) / np.maximum(s0 - s1, 1e-6), 0.0)
-    position = index + offsets[last] + np.clip(fraction, 0.0, 1.0)
+    position = index + offsets[last] + np.minimum(np.maximum(fraction, 0.0), 1.0)
     return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
 
 
@@ -217,7 +223,8 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         allowed &= usable[:, None]
         in_view = np.count_nonzero(usable)
         # (the rays in view of a ball cut by the frame's edge all point one way)
-        one_sided = max(0.7, math.hypot(cos[usable].mean(), sin[usable].mean()) + 0.1) if in_view else 0.7
+        one_sided = (max(0.7, math.hypot(cos[usable].sum() / in_view, sin[usable].sum() / in_view) + 0.1)
+                     if in_view else 0.7)
         peak, has_edge, gradient = edge_peaks(profiles, allowed)
         if wide:
             ray_index, sample_index = np.nonzero(peak)
@@ -234,29 +241,37 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             choices = [(np.argmin(away, axis=1), has_edge)]
         fits = []
         for index, found in choices:
-            position, defined, contrast = crossings(profiles, index, half)
+            # Only rays that may count: a ray's edge is used when all of these hold and its
+            # crossing is defined with no colour mask past it.
+            rays = np.flatnonzero(usable & has_edge & found)
+            if rays.size < max(8, 0.35 * in_view):
+                continue
+            index = index[rays]
+            position, defined, contrast = crossings(profiles, rays, index, half)
             rho = radii[0] + position * step
-            px, py = x + cos * rho, y + sin * rho
+            ray_cos, ray_sin = cos[rays], sin[rays]
+            px, py = x + ray_cos * rho, y + ray_sin * rho
             # The colour mask must not go on past the edge (clutter touching the ball).
             beyond = rho + max(2.0, 0.12 * radius)
-            bx = np.clip(np.rint(x + cos * beyond), 0, patch.shape[1] - 1).astype(np.intp)
-            by = np.clip(np.rint(y + sin * beyond), 0, patch.shape[0] - 1).astype(np.intp)
-            good = usable & has_edge & found & defined & (patch_mask[by, bx] != 255)
+            bx = np.minimum(np.maximum(np.rint(x + ray_cos * beyond), 0), patch.shape[1] - 1).astype(np.intp)
+            by = np.minimum(np.maximum(np.rint(y + ray_sin * beyond), 0), patch.shape[0] - 1).astype(np.intp)
+            good = defined & (patch_mask[by, bx] != 255)
             if np.count_nonzero(good) < max(8, 0.35 * in_view):
                 continue
-            fitted = robust_circle(px[good], py[good], x, y, radius, rounds, geometric=not wide)
+            px, py = px[good], py[good]
+            fitted = robust_circle(px, py, x, y, radius, rounds, geometric=not wide)
             if fitted is None:
                 continue
-            keep = fitted[3]
-            if (np.count_nonzero(keep) < max(8, 0.3 * in_view)
-                    or math.hypot(cos[good][keep].mean(), sin[good][keep].mean()) > one_sided
+            keep = np.flatnonzero(good)[fitted[3]]
+            if (keep.size < max(8, 0.3 * in_view)
+                    or math.hypot(ray_cos[keep].sum() / keep.size, ray_sin[keep].sum() / keep.size) > one_sided
                     or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
                 continue  # the edge seen on too few rays, or on one side only
-            residual = np.hypot(px[good][keep] - fitted[0], py[good][keep] - fitted[1]) - fitted[2]
+            residual = np.hypot(px[fitted[3]] - fitted[0], py[fitted[3]] - fitted[1]) - fitted[2]
             # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
-            slope = gradient[np.arange(samples), index][good][keep] / (2 * step)
-            width = contrast[good][keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
-            fits.append((fitted[:3], np.count_nonzero(keep), float(np.sqrt(np.mean(residual * residual))),
+            slope = gradient[rays[keep], index[keep]] / (2 * step)
+            width = contrast[keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+            fits.append((fitted[:3], keep.size, float(np.sqrt((residual * residual).sum() / residual.size)),
                          median(width)))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
