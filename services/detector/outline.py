@@ -114,20 +114,22 @@ def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: n
     count = profiles.shape[1]
     inner = profiles[rays, np.maximum(index - half, 0)]
     outer = profiles[rays, np.minimum(index + half, count - 1)]
-    brightness_in = np.sqrt((inner * inner).sum(axis=1))
-    brightness_out = np.sqrt((outer * outer).sum(axis=1))
+    brightness_in = np.sqrt(np.add.reduce(inner * inner, axis=1))
+    brightness_out = np.sqrt(np.add.reduce(outer * outer, axis=1))
     share = (outer @ colour) / max(float(colour @ colour), 1e-6)
     off_axis = outer - share[:, None] * colour
-    off_axis = np.sqrt((off_axis * off_axis).sum(axis=1))
+    off_axis = np.sqrt(np.add.reduce(off_axis * off_axis, axis=1))
     ball_like = (share < SHADING_SHARE) & (off_axis <= SHADING_TOLERANCE * brightness_out + quantum)
     return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
 
 
-def crossings(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray,
-              half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
+              rays: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-sample position (in samples) of the 50 % crossing between the levels ``half``
-    samples inside and outside the edge ``index`` of each of ``rays``, whether it is well
-    defined, and the contrast between those levels."""
+    samples inside and outside the edge ``index`` of each ray (of ``rays`` only, when given),
+    whether it is well defined, and the contrast between those levels."""
+    if rays is None:
+        rays = np.arange(profiles.shape[0])
     count = profiles.shape[1]
     offsets = np.arange(-half, half + 1)
     # (np.minimum/np.maximum: np.clip's wrapper costs more than the clipping of a few dozen rays)
@@ -182,13 +184,16 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
     patch = frame[box].astype(np.float32)
     patch_mask = mask[box]
     # The ball's colour: the mean of its lit, colour-mask part.
-    lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0) & cv2.inRange(patch_mask, 255, 255)
+    # (a boolean AND: OpenCV's per-call overhead exceeds the work on a patch this small)
+    lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0)
+    np.bitwise_and(lit, patch_mask == 255, out=lit)
     if not cv2.countNonZero(lit):
         return None
     colour = np.array(cv2.mean(patch, lit)[:3], np.float32)
     dark = DARK_SHARE * reference
 
     x, y, radius = x0 - left, y0 - top, r0
+    last_pixel = np.array([[patch.shape[1] - 1], [patch.shape[0] - 1]])
     wide_rounds = 0
     while True:
         wide = wide_rounds < SILHOUETTE_WIDE_ROUNDS
@@ -207,6 +212,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
                           dtype=np.float32)
         profiles, enter, leave = ray_profiles(patch, x, y, radii, directions)
+        centre = np.array([[x], [y]])
         # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
         # room for the levels around an edge.
         margin = (half + 1) * step
@@ -223,7 +229,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         allowed &= usable[:, None]
         in_view = np.count_nonzero(usable)
         # (the rays in view of a ball cut by the frame's edge all point one way)
-        one_sided = (max(0.7, math.hypot(cos[usable].sum() / in_view, sin[usable].sum() / in_view) + 0.1)
+        one_sided = (max(0.7, math.hypot(np.add.reduce(cos[usable]) / in_view, np.add.reduce(sin[usable]) / in_view) + 0.1)
                      if in_view else 0.7)
         peak, has_edge, gradient = edge_peaks(profiles, allowed)
         if wide:
@@ -247,14 +253,14 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             if rays.size < max(8, 0.35 * in_view):
                 continue
             index = index[rays]
-            position, defined, contrast = crossings(profiles, rays, index, half)
+            position, defined, contrast = crossings(profiles, index, half, rays)
             rho = radii[0] + position * step
-            ray_cos, ray_sin = cos[rays], sin[rays]
-            px, py = x + ray_cos * rho, y + ray_sin * rho
+            # (rows x, y: both coordinates in one operation each)
+            ray_directions = directions[:2, rays]
+            px, py = centre + ray_directions * rho
             # The colour mask must not go on past the edge (clutter touching the ball).
-            beyond = rho + max(2.0, 0.12 * radius)
-            bx = np.minimum(np.maximum(np.rint(x + ray_cos * beyond), 0), patch.shape[1] - 1).astype(np.intp)
-            by = np.minimum(np.maximum(np.rint(y + ray_sin * beyond), 0), patch.shape[0] - 1).astype(np.intp)
+            beyond = np.rint(centre + ray_directions * (rho + max(2.0, 0.12 * radius)))
+            bx, by = np.minimum(np.maximum(beyond, 0), last_pixel).astype(np.intp)
             good = defined & (patch_mask[by, bx] != 255)
             if np.count_nonzero(good) < max(8, 0.35 * in_view):
                 continue
@@ -264,19 +270,29 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
                 continue
             keep = np.flatnonzero(good)[fitted[3]]
             if (keep.size < max(8, 0.3 * in_view)
-                    or math.hypot(ray_cos[keep].sum() / keep.size, ray_sin[keep].sum() / keep.size) > one_sided
+                    or math.hypot(np.add.reduce(ray_directions[0, keep]) / keep.size,
+                                  np.add.reduce(ray_directions[1, keep]) / keep.size) > one_sided
                     or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
                 continue  # the edge seen on too few rays, or on one side only
-            residual = np.hypot(px[fitted[3]] - fitted[0], py[fitted[3]] - fitted[1]) - fitted[2]
+            # (how closely a fit follows its edges only tells hypotheses apart)
+            spread = None
+            if len(choices) > 1:
+                residual = np.hypot(px[fitted[3]] - fitted[0], py[fitted[3]] - fitted[1]) - fitted[2]
+                spread = float(np.sqrt(np.add.reduce(residual * residual) / residual.size))
             # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
-            slope = gradient[rays[keep], index[keep]] / (2 * step)
-            width = contrast[keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
-            fits.append((fitted[:3], keep.size, float(np.sqrt((residual * residual).sum() / residual.size)),
-                         median(width)))
+            # (only the narrow round's result is corrected for blur)
+            sigma = None
+            if not wide:
+                slope = gradient[rays[keep], index[keep]] / (2 * step)
+                width = contrast[keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+                sigma = median(width)
+            fits.append((fitted[:3], keep.size, spread, sigma))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
         best = None
-        if fits:
+        if len(fits) == 1:
+            best, sigma = fits[0][0], fits[0][3]
+        elif fits:
             most = max(fit[1] for fit in fits)
             tightest = min(fit[2] for fit in fits if fit[1] >= most / 1.05)
             chosen = max((fit for fit in fits if fit[1] >= most / 1.05 and fit[2] <= 1.5 * tightest + 0.05),
