@@ -74,11 +74,11 @@ def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: fl
     than 8 points are within a round's tolerance or a fit is degenerate.
     """
     for tolerance_ratio, tolerance_floor in rounds:
-        residual = np.hypot(px - x, py - y) - radius
-        keep = np.abs(residual) < max(tolerance_floor, tolerance_ratio * radius)
+        dx, dy = px - x, py - y
+        keep = np.abs(np.hypot(dx, dy) - radius) < max(tolerance_floor, tolerance_ratio * radius)
         if np.count_nonzero(keep) < 8:
             return None
-        fitted = fit_circle(px[keep] - x, py[keep] - y)
+        fitted = fit_circle(dx[keep], dy[keep])
         if fitted is None:
             return None
         x, y, radius = x + fitted[0], y + fitted[1], fitted[2]

@@ -44,6 +44,8 @@ class ColourPlanes:
     chroma: np.ndarray      # max - min channel after gain and blur (= S * V / 255), uint8
     reference: float        # the frame's reference level on the ``value`` scale
     dark: bool = False      # an extremely dark frame (gain >= dark_gain: averaged colour)
+    # (left, top, right, bottom): the mask is empty outside it (None: anywhere in the frame)
+    extent: tuple[int, int, int, int] | None = None
 
 
 def ellipse_kernel(size: int) -> np.ndarray | None:
@@ -127,7 +129,7 @@ class ColourMasker:
             found = self._mask_in_regions(gained, gain)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
-                                    reference=min(255.0, reference * gain), dark=dark)
+                                    reference=min(255.0, reference * gain), dark=dark, extent=found[2])
         kernel = config.dark_blur_kernel if dark else config.blur_kernel
         min_chroma = config.dark_min_chroma if dark else config.min_chroma
         mask, chroma = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
@@ -166,10 +168,12 @@ class ColourMasker:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
         return mask, chroma
 
-    def _mask_in_regions(self, gained: np.ndarray, gain: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _mask_in_regions(self, gained: np.ndarray,
+                         gain: float) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
         """Steps 2-4 only in boxes around what may be ball-coloured (see ``regions.py``), each
-        grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere; None
-        (do the whole frame) when the boxes would cover too much of it."""
+        grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere, and the
+        bounding box of the boxes; None (do the whole frame) when the boxes would cover too
+        much of it."""
         config = self.config
         height, width = gained.shape[:2]
         pending = coarse_boxes(gained, self._coarse_hue, config)
@@ -180,11 +184,14 @@ class ColourMasker:
         equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained, config.blur_kernel)
                      if self._part_clahe is not None else None)
         done = 0
+        extent = (width, height, 0, 0)
         for _round in range(MAX_REGION_ROUNDS):
             grown = []
             for box in pending:
                 left, top, right, bottom = box
                 done += (right - left) * (bottom - top)
+                extent = (min(extent[0], left), min(extent[1], top), max(extent[2], right),
+                          max(extent[3], bottom))
                 if done > MAX_REGION_SHARE * width * height:
                     return None
                 window = compute_window(box, width, height)
@@ -204,7 +211,7 @@ class ColourMasker:
                 if larger is not None:
                     grown.append(larger)
             if not grown:
-                return mask, chroma
+                return mask, chroma, extent
             pending = grown
         return None
 

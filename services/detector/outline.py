@@ -65,13 +65,20 @@ def median(values: np.ndarray) -> float:
 
 
 def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
-                 directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 directions: np.ndarray) -> np.ndarray:
     """Colours (rays x radii x 3, float32) sampled bilinearly along rays from (x, y) in
-    ``patch``, and per ray the distances along it at which it enters and leaves the patch."""
+    ``patch``."""
     map_x = (x + directions[0][:, None] * radii[None, :]).astype(np.float32)
     map_y = (y + directions[1][:, None] * radii[None, :]).astype(np.float32)
-    height, width = patch.shape[:2]
     values = cv2.remap(patch, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return values.reshape(map_x.shape + (-1,))
+
+
+def ray_bounds(shape: tuple[int, ...], x: float, y: float,
+               directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per ray from (x, y), the distances along it at which it enters and leaves a patch of
+    ``shape``."""
+    height, width = shape[:2]
     # Both axes at once (rows x, y): where each ray crosses the patch's first and last pixel.
     position = np.array([[x], [y]])
     inside = np.array([[0.0 <= x <= width - 1.0], [0.0 <= y <= height - 1.0]])
@@ -83,9 +90,25 @@ def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
     flat = np.abs(axis_directions) < 1e-9
     low = np.where(flat, np.where(inside, -np.inf, np.inf), low)
     high = np.where(flat, np.where(inside, np.inf, -np.inf), high)
-    enter = np.minimum(low, high).max(axis=0)
-    leave = np.maximum(low, high).min(axis=0)
-    return values.reshape(map_x.shape + (-1,)), enter, leave
+    return np.minimum(low, high).max(axis=0), np.maximum(low, high).min(axis=0)
+
+
+def allowed_samples(shape: tuple[int, ...], x: float, y: float, radii: np.ndarray,
+                    directions: np.ndarray, start: float, stop: float, margin: float) -> np.ndarray:
+    """Rays x radii: the samples from ``start`` to ``stop`` along each ray from (x, y) that
+    lie at least ``margin`` inside a patch of ``shape``."""
+    height, width = shape[:2]
+    # A centre at least stop + margin from every side: no ray leaves the patch before
+    # stop + margin (a unit ray's exit is at least the distance to the nearest side) nor
+    # entered it after start - margin (its entry is behind the centre), so the bounds need
+    # not be computed; the comparisons are the general case's, in float64 like it.
+    radii = radii.astype(np.float64)
+    if margin <= start and min(x, y, width - 1.0 - x, height - 1.0 - y) - margin >= stop:
+        along = (radii >= start) & (radii <= stop)
+        return np.repeat(along[None, :], directions.shape[1], axis=0)
+    enter, leave = ray_bounds(shape, x, y, directions)
+    return ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
+            & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
 
 
 def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -94,16 +117,17 @@ def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, n
     rays, count = profiles.shape[:2]
     difference = profiles[:, 2:] - profiles[:, :-2]
     gradient = np.zeros((rays, count), np.float32)
-    gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
+    np.sqrt(np.einsum("ijk,ijk->ij", difference, difference), out=gradient[:, 1:-1])
     # (the gradient is finite and not negative: multiplying by False gives exactly 0)
     gradient *= allowed
-    strongest = gradient.max(axis=1)
+    # (the reductions themselves: their ndarray methods' wrappers cost more on a few rays)
+    strongest = np.maximum.reduce(gradient, axis=1)
     floor = EDGE_FLOOR * median(strongest) if rays else 0.0
     peak = np.zeros((rays, count), bool)
     middle = gradient[:, 1:-1]
     peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
                      & (middle >= EDGE_SIGNIFICANT * strongest[:, None]))
-    return peak, peak.any(axis=1) & (strongest > max(floor, 1e-3)), gradient
+    return peak, np.logical_or.reduce(peak, axis=1) & (strongest > max(floor, 1e-3)), gradient
 
 
 def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: np.ndarray,
@@ -145,7 +169,8 @@ def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
     last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
     rows = np.arange(rays.size)
     s0, s1 = share[rows, last], share[rows, last + 1]
-    fraction = np.where(s0 - s1 > 1e-6, (s0 - 0.5) / np.maximum(s0 - s1, 1e-6), 0.0)
+    drop = s0 - s1
+    fraction = np.where(drop > 1e-6, (s0 - 0.5) / np.maximum(drop, 1e-6), 0.0)
     position = index + offsets[last] + np.minimum(np.maximum(fraction, 0.0), 1.0)
     return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
 
@@ -211,13 +236,11 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         half = max(1, int(round(min(EDGE_HALF_WIDTH, 0.3 * radius) / step)))
         radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
                           dtype=np.float32)
-        profiles, enter, leave = ray_profiles(patch, x, y, radii, directions)
+        profiles = ray_profiles(patch, x, y, radii, directions)
         centre = np.array([[x], [y]])
         # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
         # room for the levels around an edge.
-        margin = (half + 1) * step
-        allowed = ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
-                   & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
+        allowed = allowed_samples(patch.shape, x, y, radii, directions, start, stop, (half + 1) * step)
         usable = allowed.any(axis=1)
         for other in others:  # rays towards another ball see its colour, not this outline
             dx, dy = other.x - left - x, other.y - top - y
