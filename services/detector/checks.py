@@ -202,7 +202,8 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
         return NO_COLOUR
     inside = disc((box[0].stop - box[0].start, box[1].stop - box[1].start),
                   x - box[1].start, y - box[0].start, 0.85 * radius)
-    selected = cv2.inRange(planes.mask[box], 255, 255) & inside
+    # (a boolean plane: OpenCV's per-call overhead exceeds the work on a disc this small)
+    selected = np.bitwise_and(inside, planes.mask[box] == 255)
     if not cv2.countNonZero(selected):
         return NO_COLOUR
     # Averaging the unblurred disc recovers the hue that uint8 rounding hides in a very

@@ -241,7 +241,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
         # room for the levels around an edge.
         allowed = allowed_samples(patch.shape, x, y, radii, directions, start, stop, (half + 1) * step)
-        usable = allowed.any(axis=1)
+        usable = np.logical_or.reduce(allowed, axis=1)
         for other in others:  # rays towards another ball see its colour, not this outline
             dx, dy = other.x - left - x, other.y - top - y
             distance = math.hypot(dx, dy)
@@ -262,7 +262,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
                                                          half, gain, dark)
             first = np.argmax(outline, axis=1)
             outermost = peak.shape[1] - 1 - np.argmax(peak[:, ::-1], axis=1)
-            choices = [(first, outline.any(axis=1))]
+            choices = [(first, np.logical_or.reduce(outline, axis=1))]
             if np.count_nonzero((first != outermost) & has_edge) >= 0.15 * samples:
                 choices.append((outermost, has_edge))
         else:
