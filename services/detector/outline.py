@@ -59,8 +59,8 @@ def median(values: np.ndarray) -> float:
     middle = count // 2
     if count % 2:
         return float(np.partition(values, middle)[middle])
-    # (the mean of the two middle values, as np.median takes it: in the array's own type)
-    # (sum over count is what ndarray.mean computes, without its wrapper's overhead)
+    # (the mean of the two middle values, as np.median takes it: in the array's own type;
+    # their sum over two is what ndarray.mean computes, without its wrapper's overhead)
     return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].sum() / 2)
 
 
@@ -252,8 +252,10 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         allowed &= usable[:, None]
         in_view = np.count_nonzero(usable)
         # (the rays in view of a ball cut by the frame's edge all point one way)
-        one_sided = (max(0.7, math.hypot(np.add.reduce(cos[usable]) / in_view, np.add.reduce(sin[usable]) / in_view) + 0.1)
-                     if in_view else 0.7)
+        one_sided = 0.7
+        if in_view:
+            one_sided = max(0.7, math.hypot(np.add.reduce(cos[usable]) / in_view,
+                                            np.add.reduce(sin[usable]) / in_view) + 0.1)
         peak, has_edge, gradient = edge_peaks(profiles, allowed)
         if wide:
             ray_index, sample_index = np.nonzero(peak)
