@@ -87,14 +87,16 @@ def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: in
     with fewer than 6 rays left the spread is 0.
     """
     height, width = mask.shape
-    steps = np.linspace(0.7 * radius, 1.5 * radius, EDGE_STEPS)
+    steps = evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS)
     directions = rim_directions(samples)
     columns = np.rint(x + directions[0][:, None] * steps[None, :]).astype(np.intp)
     rows = np.rint(y + directions[1][:, None] * steps[None, :]).astype(np.intp)
-    inside = ((columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)).all(axis=1)
-    if np.count_nonzero(inside) < 6:
-        return 0.0
-    values = mask[rows[inside], columns[inside]]
+    if not well_inside(x, y, 1.5 * radius, width, height):
+        inside = ((columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)).all(axis=1)
+        if np.count_nonzero(inside) < 6:
+            return 0.0
+        rows, columns = rows[inside], columns[inside]
+    values = mask[rows, columns]
     on = values == 255
     first_off = np.argmin(on, axis=1)
     # The ray starts in the mask, leaves it, and meets no explained (accepted ball) pixel first.
@@ -103,7 +105,24 @@ def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: in
              & (edges >= 0.85 * radius))
     if np.count_nonzero(valid) < 6:
         return 0.0
-    return float(np.std(edges[valid])) / radius
+    edges = edges[valid]
+    # (np.std's own steps, without its wrappers' overhead)
+    deviation = edges - np.add.reduce(edges) / edges.size
+    return float(np.sqrt(np.add.reduce(deviation * deviation) / edges.size)) / radius
+
+
+def evenly_spaced(start: float, stop: float, count: int) -> np.ndarray:
+    """``np.linspace(start, stop, count)``, computed as it does, without its wrapper's overhead
+    (per measured circle)."""
+    values = np.arange(float(count)) * ((stop - start) / (count - 1)) + start
+    values[-1] = stop
+    return values
+
+
+def well_inside(x: float, y: float, reach: float, width: int, height: int) -> bool:
+    """Whether every pixel rounded from within ``reach`` of (x, y) lies in a frame of
+    ``width`` x ``height`` (with a pixel to spare for rounding)."""
+    return reach + 1.0 <= min(x, y, width - 1.0 - x, height - 1.0 - y)
 
 
 def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
@@ -119,8 +138,9 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     points = np.rint(np.array([[x], [y], [x], [y]])
                      + np.array([[radius - offset], [radius - offset], [radius + offset],
                                  [radius + offset]]) * rim_directions(samples)).astype(np.intp)
-    in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
-    points = points[:, in_frame]
+    if not well_inside(x, y, radius + offset, width, height):
+        in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
+        points = points[:, in_frame]
     inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
     known = (inner != EXPLAINED) & (outer != EXPLAINED)
     known_count = int(np.count_nonzero(known))
@@ -139,8 +159,10 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     ring = disc(patch.shape, centre_x, centre_y, outer_radius)
     cv2.circle(ring, fixed_point(centre_x, centre_y), fixed_radius(1.15 * radius + 1), 0, -1,
                cv2.LINE_8, FIXED_BITS)
-    on = cv2.inRange(patch, 255, 255)
-    usable = cv2.bitwise_not(cv2.inRange(patch, EXPLAINED, EXPLAINED))
+    # (boolean planes: OpenCV's per-call overhead exceeds the work on a patch this small; only
+    # their counts are used)
+    on = patch == 255
+    usable = patch != EXPLAINED
     inside &= usable
     ring &= usable
     inside_count = cv2.countNonZero(inside)
@@ -180,7 +202,8 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
         return NO_COLOUR
     inside = disc((box[0].stop - box[0].start, box[1].stop - box[1].start),
                   x - box[1].start, y - box[0].start, 0.85 * radius)
-    selected = cv2.inRange(planes.mask[box], 255, 255) & inside
+    # (a boolean plane: OpenCV's per-call overhead exceeds the work on a disc this small)
+    selected = np.bitwise_and(inside, planes.mask[box] == 255)
     if not cv2.countNonZero(selected):
         return NO_COLOUR
     # Averaging the unblurred disc recovers the hue that uint8 rounding hides in a very

@@ -133,7 +133,7 @@ class BallDetector:
 
     # ------------------------------------------------------------------------- candidates
     def _find_candidates(self, planes: ColourPlanes, scale: float) -> list[Candidate]:
-        contours, shape_mask = fill_holes(planes.mask)
+        contours, shape_mask = fill_holes(planes.mask, planes.extent)
         if not contours:
             return []
         search = frame_search(planes, self.config, scale, shape_mask)

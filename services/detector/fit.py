@@ -20,8 +20,9 @@ def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | N
     # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
     squared = dx * dx + dy * dy
     m00, m01, m11 = float(dx @ dx), float(dx @ dy), float(dy @ dy)
-    m02, m12, m22 = float(dx.sum()), float(dy.sum()), float(dx.size)
-    t0, t1, t2 = float(dx @ squared), float(dy @ squared), float(squared.sum())
+    # (np.add.reduce is what ndarray.sum calls, without its wrapper: this runs per fit round)
+    m02, m12, m22 = float(np.add.reduce(dx)), float(np.add.reduce(dy)), float(dx.size)
+    t0, t1, t2 = float(dx @ squared), float(dy @ squared), float(np.add.reduce(squared))
     # Cramer's rule on the symmetric 3x3 normal equations.
     c00, c01, c02 = m11 * m22 - m12 * m12, m02 * m12 - m01 * m22, m01 * m12 - m02 * m11
     determinant = m00 * c00 + m01 * c01 + m02 * c02
@@ -47,17 +48,19 @@ def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius:
         ux, uy = dx / distance, dy / distance
         residual = distance - radius
         # normal equations of the Jacobian (-ux, -uy, -1)
-        normal = np.array([[ux @ ux, ux @ uy, ux.sum()], [ux @ uy, uy @ uy, uy.sum()],
-                           [ux.sum(), uy.sum(), float(ux.size)]])
-        gradient = np.array([ux @ residual, uy @ residual, residual.sum()])
+        cross, sum_x, sum_y = ux @ uy, np.add.reduce(ux), np.add.reduce(uy)
+        normal = np.array([[ux @ ux, cross, sum_x], [cross, uy @ uy, sum_y],
+                           [sum_x, sum_y, float(ux.size)]])
+        gradient = np.array([ux @ residual, uy @ residual, np.add.reduce(residual)])
         try:
             delta = np.linalg.solve(normal, gradient)
         except np.linalg.LinAlgError:
             break
-        if not np.all(np.isfinite(delta)):
+        shift_x, shift_y, growth = delta.tolist()
+        if not (math.isfinite(shift_x) and math.isfinite(shift_y) and math.isfinite(growth)):
             break
-        x, y, radius = x + float(delta[0]), y + float(delta[1]), radius + float(delta[2])
-        if float(np.abs(delta).sum()) < 1e-3:
+        x, y, radius = x + shift_x, y + shift_y, radius + growth
+        if float(np.add.reduce(np.abs(delta))) < 1e-3:
             break
     return x, y, radius
 
@@ -71,11 +74,11 @@ def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: fl
     than 8 points are within a round's tolerance or a fit is degenerate.
     """
     for tolerance_ratio, tolerance_floor in rounds:
-        residual = np.hypot(px - x, py - y) - radius
-        keep = np.abs(residual) < max(tolerance_floor, tolerance_ratio * radius)
+        dx, dy = px - x, py - y
+        keep = np.abs(np.hypot(dx, dy) - radius) < max(tolerance_floor, tolerance_ratio * radius)
         if np.count_nonzero(keep) < 8:
             return None
-        fitted = fit_circle(px[keep] - x, py[keep] - y)
+        fitted = fit_circle(dx[keep], dy[keep])
         if fitted is None:
             return None
         x, y, radius = x + fitted[0], y + fitted[1], fitted[2]

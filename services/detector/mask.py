@@ -44,6 +44,8 @@ class ColourPlanes:
     chroma: np.ndarray      # max - min channel after gain and blur (= S * V / 255), uint8
     reference: float        # the frame's reference level on the ``value`` scale
     dark: bool = False      # an extremely dark frame (gain >= dark_gain: averaged colour)
+    # (left, top, right, bottom): the mask is empty outside it (None: anywhere in the frame)
+    extent: tuple[int, int, int, int] | None = None
 
 
 def ellipse_kernel(size: int) -> np.ndarray | None:
@@ -68,15 +70,21 @@ def check_image(image_bgr: np.ndarray) -> np.ndarray:
     return image_bgr
 
 
-def reference_level(image_bgr: np.ndarray) -> float:
+def quarter_sample(image_bgr: np.ndarray) -> np.ndarray:
+    """The frame's 1/4-size nearest-neighbour sample."""
+    height, width = image_bgr.shape[:2]
+    return cv2.resize(image_bgr, (max(1, width // 4), max(1, height // 4)), interpolation=cv2.INTER_NEAREST)
+
+
+def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> float:
     """The frame's bright level: 99th percentile of V, but at most 3x its median.
 
     The cap keeps a small bright area (the sky above a dimly lit floor, a lamp) from
-    setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample.
+    setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample
+    (``small``: the frame's ``quarter_sample`` when already made).
     """
-    height, width = image_bgr.shape[:2]
-    small = cv2.resize(image_bgr, (max(1, width // 4), max(1, height // 4)),
-                       interpolation=cv2.INTER_NEAREST)
+    if small is None:
+        small = quarter_sample(image_bgr)
     value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2]).ravel()
     last = value.size - 1
     ranks = [last // 2, int(0.99 * last)]
@@ -112,7 +120,8 @@ class ColourMasker:
     def planes(self, image_bgr: np.ndarray) -> ColourPlanes:
         """The cleaned colour mask of a checked BGR frame, with the planes the checks read."""
         config = self.config
-        reference = reference_level(image_bgr)
+        small = quarter_sample(image_bgr)
+        reference = reference_level(image_bgr, small)
         gain = frame_gain(reference, config)
         # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
         # sub-unit colour information that uint8 rounding would otherwise destroy.
@@ -124,10 +133,13 @@ class ColourMasker:
         # survive it).
         dark = config.dark_gain > 0 and gain >= config.dark_gain
         if not dark and regions_apply(gained.shape):
-            found = self._mask_in_regions(gained, gain)
+            # (nearest-neighbour sampling commutes with the per-pixel gain: the regions' coarse
+            # search reads the same sample of the gained frame)
+            small_gained = cv2.convertScaleAbs(small, alpha=gain) if gain > 1.0 else small
+            found = self._mask_in_regions(gained, gain, small_gained)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
-                                    reference=min(255.0, reference * gain), dark=dark)
+                                    reference=min(255.0, reference * gain), dark=dark, extent=found[2])
         kernel = config.dark_blur_kernel if dark else config.blur_kernel
         min_chroma = config.dark_min_chroma if dark else config.min_chroma
         mask, chroma = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
@@ -166,13 +178,15 @@ class ColourMasker:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
         return mask, chroma
 
-    def _mask_in_regions(self, gained: np.ndarray, gain: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _mask_in_regions(self, gained: np.ndarray, gain: float, small: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
         """Steps 2-4 only in boxes around what may be ball-coloured (see ``regions.py``), each
-        grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere; None
-        (do the whole frame) when the boxes would cover too much of it."""
+        grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere, and the
+        bounding box of the boxes; None (do the whole frame) when the boxes would cover too
+        much of it. ``small``: the gained frame's ``quarter_sample`` when already made."""
         config = self.config
         height, width = gained.shape[:2]
-        pending = coarse_boxes(gained, self._coarse_hue, config)
+        pending = coarse_boxes(gained, self._coarse_hue, config, small)
         if pending is None:
             return None
         mask = np.zeros((height, width), np.uint8)
@@ -180,11 +194,14 @@ class ColourMasker:
         equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained, config.blur_kernel)
                      if self._part_clahe is not None else None)
         done = 0
+        extent = (width, height, 0, 0)
         for _round in range(MAX_REGION_ROUNDS):
             grown = []
             for box in pending:
                 left, top, right, bottom = box
                 done += (right - left) * (bottom - top)
+                extent = (min(extent[0], left), min(extent[1], top), max(extent[2], right),
+                          max(extent[3], bottom))
                 if done > MAX_REGION_SHARE * width * height:
                     return None
                 window = compute_window(box, width, height)
@@ -204,7 +221,7 @@ class ColourMasker:
                 if larger is not None:
                     grown.append(larger)
             if not grown:
-                return mask, chroma
+                return mask, chroma, extent
             pending = grown
         return None
 

@@ -59,29 +59,56 @@ def median(values: np.ndarray) -> float:
     middle = count // 2
     if count % 2:
         return float(np.partition(values, middle)[middle])
-    # (the mean of the two middle values, as np.median takes it: in the array's own type)
-    return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].mean())
+    # (the mean of the two middle values, as np.median takes it: in the array's own type;
+    # their sum over two is what ndarray.mean computes, without its wrapper's overhead)
+    return float(np.partition(values, (middle - 1, middle))[middle - 1:middle + 1].sum() / 2)
 
 
 def ray_profiles(patch: np.ndarray, x: float, y: float, radii: np.ndarray,
-                 directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 directions: np.ndarray) -> np.ndarray:
     """Colours (rays x radii x 3, float32) sampled bilinearly along rays from (x, y) in
-    ``patch``, and per ray the distances along it at which it enters and leaves the patch."""
+    ``patch``."""
     map_x = (x + directions[0][:, None] * radii[None, :]).astype(np.float32)
     map_y = (y + directions[1][:, None] * radii[None, :]).astype(np.float32)
-    height, width = patch.shape[:2]
     values = cv2.remap(patch, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    enter = np.full(directions.shape[1], -np.inf)
-    leave = np.full(directions.shape[1], np.inf)
-    for position, direction, size in ((x, directions[0], width), (y, directions[1], height)):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            low, high = (0.0 - position) / direction, (size - 1.0 - position) / direction
-        flat = np.abs(direction) < 1e-9
-        low = np.where(flat, np.where(0.0 <= position <= size - 1.0, -np.inf, np.inf), low)
-        high = np.where(flat, np.where(0.0 <= position <= size - 1.0, np.inf, -np.inf), high)
-        enter = np.maximum(enter, np.minimum(low, high))
-        leave = np.minimum(leave, np.maximum(low, high))
-    return values.reshape(map_x.shape + (-1,)), enter, leave
+    return values.reshape(map_x.shape + (-1,))
+
+
+def ray_bounds(shape: tuple[int, ...], x: float, y: float,
+               directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per ray from (x, y), the distances along it at which it enters and leaves a patch of
+    ``shape``."""
+    height, width = shape[:2]
+    # Both axes at once (rows x, y): where each ray crosses the patch's first and last pixel.
+    position = np.array([[x], [y]])
+    inside = np.array([[0.0 <= x <= width - 1.0], [0.0 <= y <= height - 1.0]])
+    axis_directions = directions[:2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        low = (0.0 - position) / axis_directions
+        high = (np.array([[width - 1.0 - x], [height - 1.0 - y]])) / axis_directions
+    # (a ray parallel to an axis crosses neither of its sides: all or none of it is inside)
+    flat = np.abs(axis_directions) < 1e-9
+    low = np.where(flat, np.where(inside, -np.inf, np.inf), low)
+    high = np.where(flat, np.where(inside, np.inf, -np.inf), high)
+    return np.minimum(low, high).max(axis=0), np.maximum(low, high).min(axis=0)
+
+
+def allowed_samples(shape: tuple[int, ...], x: float, y: float, radii: np.ndarray,
+                    directions: np.ndarray, start: float, stop: float, margin: float) -> np.ndarray:
+    """Rays x radii: the samples from ``start`` to ``stop`` along each ray from (x, y) that
+    lie at least ``margin`` inside a patch of ``shape``."""
+    height, width = shape[:2]
+    # A centre at least stop + margin from every side: no ray leaves the patch before
+    # stop + margin (a unit ray's exit is at least the distance to the nearest side) nor
+    # entered it after start - margin (its entry is behind the centre), so the bounds need
+    # not be computed; the comparisons are the general case's, in float64 like it.
+    radii = radii.astype(np.float64)
+    if margin <= start and min(x, y, width - 1.0 - x, height - 1.0 - y) - margin >= stop:
+        along = (radii >= start) & (radii <= stop)
+        return np.repeat(along[None, :], directions.shape[1], axis=0)
+    enter, leave = ray_bounds(shape, x, y, directions)
+    return ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
+            & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
 
 
 def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,15 +117,17 @@ def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, n
     rays, count = profiles.shape[:2]
     difference = profiles[:, 2:] - profiles[:, :-2]
     gradient = np.zeros((rays, count), np.float32)
-    gradient[:, 1:-1] = np.sqrt(np.einsum("ijk,ijk->ij", difference, difference))
-    gradient[~allowed] = 0.0
-    strongest = gradient.max(axis=1)
+    np.sqrt(np.einsum("ijk,ijk->ij", difference, difference), out=gradient[:, 1:-1])
+    # (the gradient is finite and not negative: multiplying by False gives exactly 0)
+    gradient *= allowed
+    # (the reductions themselves: their ndarray methods' wrappers cost more on a few rays)
+    strongest = np.maximum.reduce(gradient, axis=1)
     floor = EDGE_FLOOR * median(strongest) if rays else 0.0
     peak = np.zeros((rays, count), bool)
     middle = gradient[:, 1:-1]
     peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
                      & (middle >= EDGE_SIGNIFICANT * strongest[:, None]))
-    return peak, peak.any(axis=1) & (strongest > max(floor, 1e-3)), gradient
+    return peak, np.logical_or.reduce(peak, axis=1) & (strongest > max(floor, 1e-3)), gradient
 
 
 def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: np.ndarray,
@@ -109,25 +138,27 @@ def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: n
     count = profiles.shape[1]
     inner = profiles[rays, np.maximum(index - half, 0)]
     outer = profiles[rays, np.minimum(index + half, count - 1)]
-    brightness_in = np.sqrt((inner * inner).sum(axis=1))
-    brightness_out = np.sqrt((outer * outer).sum(axis=1))
+    brightness_in = np.sqrt(np.add.reduce(inner * inner, axis=1))
+    brightness_out = np.sqrt(np.add.reduce(outer * outer, axis=1))
     share = (outer @ colour) / max(float(colour @ colour), 1e-6)
     off_axis = outer - share[:, None] * colour
-    off_axis = np.sqrt((off_axis * off_axis).sum(axis=1))
+    off_axis = np.sqrt(np.add.reduce(off_axis * off_axis, axis=1))
     ball_like = (share < SHADING_SHARE) & (off_axis <= SHADING_TOLERANCE * brightness_out + quantum)
     return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
 
 
-def crossings(profiles: np.ndarray, index: np.ndarray,
-              half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
+              rays: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-sample position (in samples) of the 50 % crossing between the levels ``half``
-    samples inside and outside each ray's edge ``index``, whether it is well defined, and the
-    contrast between those levels."""
-    rays, count = profiles.shape[:2]
-    rows = np.arange(rays)
+    samples inside and outside the edge ``index`` of each ray (of ``rays`` only, when given),
+    whether it is well defined, and the contrast between those levels."""
+    if rays is None:
+        rays = np.arange(profiles.shape[0])
+    count = profiles.shape[1]
     offsets = np.arange(-half, half + 1)
-    window = np.clip(index[:, None] + offsets[None, :], 0, count - 1)
-    values = profiles[rows[:, None], window]                      # rays x (2 half + 1) x 3
+    # (np.minimum/np.maximum: np.clip's wrapper costs more than the clipping of a few dozen rays)
+    window = np.minimum(np.maximum(index[:, None] + offsets[None, :], 0), count - 1)
+    values = profiles[rays[:, None], window]                      # rays x (2 half + 1) x 3
     level_in, level_out = values[:, 0], values[:, -1]
     contrast = level_in - level_out
     norm = np.einsum("ij,ij->i", contrast, contrast)
@@ -136,9 +167,11 @@ def crossings(profiles: np.ndarray, index: np.ndarray,
     above = share >= 0.5
     # the outermost sample still at least half way to the inside level, and the next one
     last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
+    rows = np.arange(rays.size)
     s0, s1 = share[rows, last], share[rows, last + 1]
-    fraction = np.where(s0 - s1 > 1e-6, (s0 - 0.5) / np.maximum(s0 - s1, 1e-6), 0.0)
-    position = index + offsets[last] + np.clip(fraction, 0.0, 1.0)
+    drop = s0 - s1
+    fraction = np.where(drop > 1e-6, (s0 - 0.5) / np.maximum(drop, 1e-6), 0.0)
+    position = index + offsets[last] + np.minimum(np.maximum(fraction, 0.0), 1.0)
     return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
 
 
@@ -176,13 +209,16 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
     patch = frame[box].astype(np.float32)
     patch_mask = mask[box]
     # The ball's colour: the mean of its lit, colour-mask part.
-    lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0) & cv2.inRange(patch_mask, 255, 255)
+    # (a boolean AND: OpenCV's per-call overhead exceeds the work on a patch this small)
+    lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0)
+    np.bitwise_and(lit, patch_mask == 255, out=lit)
     if not cv2.countNonZero(lit):
         return None
     colour = np.array(cv2.mean(patch, lit)[:3], np.float32)
     dark = DARK_SHARE * reference
 
     x, y, radius = x0 - left, y0 - top, r0
+    last_pixel = np.array([[patch.shape[1] - 1], [patch.shape[0] - 1]])
     wide_rounds = 0
     while True:
         wide = wide_rounds < SILHOUETTE_WIDE_ROUNDS
@@ -200,13 +236,12 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         half = max(1, int(round(min(EDGE_HALF_WIDTH, 0.3 * radius) / step)))
         radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
                           dtype=np.float32)
-        profiles, enter, leave = ray_profiles(patch, x, y, radii, directions)
+        profiles = ray_profiles(patch, x, y, radii, directions)
+        centre = np.array([[x], [y]])
         # Only the part of each ray inside the frame (a ball cut by the frame's edge), with
         # room for the levels around an edge.
-        margin = (half + 1) * step
-        allowed = ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
-                   & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
-        usable = allowed.any(axis=1)
+        allowed = allowed_samples(patch.shape, x, y, radii, directions, start, stop, (half + 1) * step)
+        usable = np.logical_or.reduce(allowed, axis=1)
         for other in others:  # rays towards another ball see its colour, not this outline
             dx, dy = other.x - left - x, other.y - top - y
             distance = math.hypot(dx, dy)
@@ -217,7 +252,10 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         allowed &= usable[:, None]
         in_view = np.count_nonzero(usable)
         # (the rays in view of a ball cut by the frame's edge all point one way)
-        one_sided = max(0.7, math.hypot(cos[usable].mean(), sin[usable].mean()) + 0.1) if in_view else 0.7
+        one_sided = 0.7
+        if in_view:
+            one_sided = max(0.7, math.hypot(np.add.reduce(cos[usable]) / in_view,
+                                            np.add.reduce(sin[usable]) / in_view) + 0.1)
         peak, has_edge, gradient = edge_peaks(profiles, allowed)
         if wide:
             ray_index, sample_index = np.nonzero(peak)
@@ -226,7 +264,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
                                                          half, gain, dark)
             first = np.argmax(outline, axis=1)
             outermost = peak.shape[1] - 1 - np.argmax(peak[:, ::-1], axis=1)
-            choices = [(first, outline.any(axis=1))]
+            choices = [(first, np.logical_or.reduce(outline, axis=1))]
             if np.count_nonzero((first != outermost) & has_edge) >= 0.15 * samples:
                 choices.append((outermost, has_edge))
         else:
@@ -234,34 +272,52 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             choices = [(np.argmin(away, axis=1), has_edge)]
         fits = []
         for index, found in choices:
-            position, defined, contrast = crossings(profiles, index, half)
+            # Only rays that may count: a ray's edge is used when all of these hold and its
+            # crossing is defined with no colour mask past it.
+            rays = np.flatnonzero(usable & has_edge & found)
+            if rays.size < max(8, 0.35 * in_view):
+                continue
+            index = index[rays]
+            position, defined, contrast = crossings(profiles, index, half, rays)
             rho = radii[0] + position * step
-            px, py = x + cos * rho, y + sin * rho
+            # (rows x, y: both coordinates in one operation each)
+            ray_directions = directions[:2, rays]
+            px, py = centre + ray_directions * rho
             # The colour mask must not go on past the edge (clutter touching the ball).
-            beyond = rho + max(2.0, 0.12 * radius)
-            bx = np.clip(np.rint(x + cos * beyond), 0, patch.shape[1] - 1).astype(np.intp)
-            by = np.clip(np.rint(y + sin * beyond), 0, patch.shape[0] - 1).astype(np.intp)
-            good = usable & has_edge & found & defined & (patch_mask[by, bx] != 255)
+            beyond = np.rint(centre + ray_directions * (rho + max(2.0, 0.12 * radius)))
+            bx, by = np.minimum(np.maximum(beyond, 0), last_pixel).astype(np.intp)
+            good = defined & (patch_mask[by, bx] != 255)
             if np.count_nonzero(good) < max(8, 0.35 * in_view):
                 continue
-            fitted = robust_circle(px[good], py[good], x, y, radius, rounds, geometric=not wide)
+            px, py = px[good], py[good]
+            fitted = robust_circle(px, py, x, y, radius, rounds, geometric=not wide)
             if fitted is None:
                 continue
-            keep = fitted[3]
-            if (np.count_nonzero(keep) < max(8, 0.3 * in_view)
-                    or math.hypot(cos[good][keep].mean(), sin[good][keep].mean()) > one_sided
+            keep = np.flatnonzero(good)[fitted[3]]
+            if (keep.size < max(8, 0.3 * in_view)
+                    or math.hypot(np.add.reduce(ray_directions[0, keep]) / keep.size,
+                                  np.add.reduce(ray_directions[1, keep]) / keep.size) > one_sided
                     or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
                 continue  # the edge seen on too few rays, or on one side only
-            residual = np.hypot(px[good][keep] - fitted[0], py[good][keep] - fitted[1]) - fitted[2]
+            # (how closely a fit follows its edges only tells hypotheses apart)
+            spread = None
+            if len(choices) > 1:
+                residual = np.hypot(px[fitted[3]] - fitted[0], py[fitted[3]] - fitted[1]) - fitted[2]
+                spread = float(np.sqrt(np.add.reduce(residual * residual) / residual.size))
             # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
-            slope = gradient[np.arange(samples), index][good][keep] / (2 * step)
-            width = contrast[good][keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
-            fits.append((fitted[:3], np.count_nonzero(keep), float(np.sqrt(np.mean(residual * residual))),
-                         median(width)))
+            # (only the narrow round's result is corrected for blur)
+            sigma = None
+            if not wide:
+                slope = gradient[rays[keep], index[keep]] / (2 * step)
+                width = contrast[keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+                sigma = median(width)
+            fits.append((fitted[:3], keep.size, spread, sigma))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
         best = None
-        if fits:
+        if len(fits) == 1:
+            best, sigma = fits[0][0], fits[0][3]
+        elif fits:
             most = max(fit[1] for fit in fits)
             tightest = min(fit[2] for fit in fits if fit[1] >= most / 1.05)
             chosen = max((fit for fit in fits if fit[1] >= most / 1.05 and fit[2] <= 1.5 * tightest + 0.05),

@@ -52,13 +52,29 @@ class FrameSearch:
     scale: float            # processing size / input size
 
 
-def fill_holes(mask: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+def mask_box(mask: np.ndarray, extent: tuple[int, int, int, int] | None = None) -> tuple[int, int, int, int]:
+    """``cv2.boundingRect(mask)``, read only within ``extent`` (left, top, right, bottom), outside
+    which the mask is known to be empty: the whole frame's scan costs more than a blob's."""
+    if extent is None:
+        return cv2.boundingRect(mask)
+    left, top, right, bottom = extent
+    if left >= right or top >= bottom:
+        return 0, 0, 0, 0
+    part_left, part_top, box_width, box_height = cv2.boundingRect(mask[top:bottom, left:right])
+    if not box_width:
+        return 0, 0, 0, 0
+    return part_left + left, part_top + top, box_width, box_height
+
+
+def fill_holes(mask: np.ndarray,
+               extent: tuple[int, int, int, int] | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """Outer contours of the mask's blobs, and the mask with each hole filled that is at most
-    HOLE_SHARE of its blob's outline area (``mask`` itself when there is none)."""
+    HOLE_SHARE of its blob's outline area (``mask`` itself when there is none). ``extent``: see
+    ``mask_box``."""
     # (found in the box around the mask's pixels, with a blank pixel more each way where the
     # frame has one: OpenCV copies the whole image it is given, most of it blank here)
     height, width = mask.shape
-    left, top, box_width, box_height = cv2.boundingRect(mask)
+    left, top, box_width, box_height = mask_box(mask, extent)
     if not box_width:
         return [], mask
     right, bottom = min(width, left + box_width + 1), min(height, top + box_height + 1)
@@ -78,13 +94,15 @@ def fill_holes(mask: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     return outer, filled
 
 
-def boundary_points(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def boundary_points(mask: np.ndarray,
+                    extent: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Columns and rows (float64, in row order) of the mask's boundary pixels, leaving out
-    the frame's border: there the mask's edge is the frame's, not the ball's."""
+    the frame's border: there the mask's edge is the frame's, not the ball's. ``extent``: see
+    ``mask_box``."""
     height, width = mask.shape
     # Only the box around the mask's pixels is searched, with a pixel more each way (blank,
     # or the frame's border), so its erosion is the whole mask's.
-    left, top, box_width, box_height = cv2.boundingRect(mask)
+    left, top, box_width, box_height = mask_box(mask, extent)
     if not box_width:
         return np.zeros(0, np.float64), np.zeros(0, np.float64)
     right, bottom = min(width, left + box_width + 1), min(height, top + box_height + 1)
@@ -109,12 +127,13 @@ def boundary_points(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def frame_search(planes: ColourPlanes, config: DetectorConfig, scale: float,
                  mask: np.ndarray | None = None) -> FrameSearch:
     """The search of one frame: its boundary pixels and the radius limits at processing size.
-    ``mask``: the shape mask (default the colour mask)."""
+    ``mask``: the shape mask (default the colour mask; its filled holes lie inside its blobs, so
+    within the colour mask's extent)."""
     mask = planes.mask if mask is None else mask
     height, width = mask.shape
     min_radius = max(1.0, config.min_radius * scale)
     max_radius = (config.max_radius * scale) if config.max_radius else min(width, height) / 2.0
-    boundary_x, boundary_y = boundary_points(mask)
+    boundary_x, boundary_y = boundary_points(mask, planes.extent)
     return FrameSearch(planes, mask, boundary_x, boundary_y, min_radius, max_radius,
                        max(1.0, config.small_radius * scale), scale)
 

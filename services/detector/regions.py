@@ -67,12 +67,16 @@ def regions_apply(shape: tuple[int, ...]) -> bool:
     return width >= REGIONS_MIN_WIDTH and height >= REGIONS_MIN_HEIGHT and width % 2 == height % 2 == 0
 
 
-def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfig) -> list[Box] | None:
+def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfig,
+                 small: np.ndarray | None = None) -> list[Box] | None:
     """Boxes holding every pixel of ``frame`` whose colour may pass the mask, found on every
-    COARSE_STEP-th pixel of it; None when they would cover too much of it."""
+    COARSE_STEP-th pixel of it; None when they would cover too much of it. ``small``: that
+    sample (nearest-neighbour, COARSE_STEP times smaller) when already made."""
     height, width = frame.shape[:2]
     # (every 4th pixel: a ball of min_radius 3 px holds one wherever it lies)
-    small = cv2.resize(frame, (width // COARSE_STEP, height // COARSE_STEP), interpolation=cv2.INTER_NEAREST)
+    size = (width // COARSE_STEP, height // COARSE_STEP)
+    if small is None or small.shape[1::-1] != size:
+        small = cv2.resize(frame, size, interpolation=cv2.INTER_NEAREST)
     hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
     coarse = cv2.LUT(cv2.extractChannel(hsv, 0), hue_table)
     coarse &= cv2.inRange(cv2.extractChannel(hsv, 1), int(config.s_min * COARSE_SATURATION_SHARE), 255)

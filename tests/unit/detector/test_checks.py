@@ -6,10 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from balltrack.services.detector.checks import (CORNER_SPREAD, NO_COLOUR, CandidateMetrics,
-                                                ColourMetrics, MaskMetrics, colour_stats,
-                                                edge_spread, hue_in_range, judge, mean_hue,
-                                                measure_mask)
+from balltrack.services.detector.checks import (CORNER_SPREAD, EDGE_STEPS, NO_COLOUR,
+                                                CandidateMetrics, ColourMetrics, MaskMetrics,
+                                                colour_stats, edge_spread, evenly_spaced,
+                                                hue_in_range, judge, mean_hue, measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
@@ -149,3 +149,10 @@ def test_judge_accepts_what_the_rejections_border_on():
     assert judge(CandidateMetrics(GOOD_MASK, warm, size=1.5), config) is None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None
+
+
+def test_evenly_spaced_is_linspace_to_the_bit():
+    # (edge_spread's samples must be np.linspace's exactly: detections depend on them)
+    for radius in np.random.default_rng(5).uniform(1.0, 200.0, 500):
+        assert np.array_equal(evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS),
+                              np.linspace(0.7 * radius, 1.5 * radius, EDGE_STEPS))

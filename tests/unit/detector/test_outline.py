@@ -8,8 +8,8 @@ import pytest
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, rim_directions
 from balltrack.services.detector.mask import ColourMasker
-from balltrack.services.detector.outline import (crossings, edge_peaks, median, ray_profiles,
-                                                 shading, silhouette)
+from balltrack.services.detector.outline import (allowed_samples, crossings, edge_peaks, median,
+                                                 ray_bounds, ray_profiles, shading, silhouette)
 from tests import harness
 from tests.unit.detector.drawing import floor, scene, to_uint8
 
@@ -33,7 +33,8 @@ def test_ray_profiles_sample_along_rays_and_know_the_patch_bounds():
     patch = np.zeros((50, 80, 3), np.float32)
     patch[:, :, 0] = np.arange(80)[None, :]  # blue channel = column
     radii = np.arange(0.0, 10.0, 0.5, dtype=np.float32)
-    profiles, enter, leave = ray_profiles(patch, 30.0, 20.0, radii, rim_directions(4))
+    profiles = ray_profiles(patch, 30.0, 20.0, radii, rim_directions(4))
+    enter, leave = ray_bounds(patch.shape, 30.0, 20.0, rim_directions(4))
     assert profiles.shape == (4, radii.size, 3)
     # the ray along +x reads the column, the ray along +y a constant one
     assert profiles[0, :, 0] == pytest.approx(30.0 + radii, abs=1e-3)
@@ -41,6 +42,20 @@ def test_ray_profiles_sample_along_rays_and_know_the_patch_bounds():
     # distances to the patch's last column / row (+x, +y) and first (-x, -y)
     assert leave[:2] == pytest.approx([49.0, 29.0]) and leave[2:] == pytest.approx([30.0, 20.0])
     assert (enter < 0).all()
+
+
+def test_allowed_samples_far_from_the_sides_are_the_bounds_own():
+    # (the shortcut for rays that stay inside the patch must give the general case's samples)
+    random = np.random.default_rng(3)
+    shape, directions = (60, 90), rim_directions(36)
+    for _ in range(200):
+        x, y = random.uniform(-5, 95), random.uniform(-5, 65)
+        start, stop, margin = random.uniform(0, 20), random.uniform(10, 40), random.uniform(0.5, 3)
+        radii = np.arange(max(0.0, start - margin), stop + margin, 0.5, dtype=np.float32)
+        enter, leave = ray_bounds(shape, x, y, directions)
+        expected = ((radii[None, :] >= np.maximum(start, enter + margin)[:, None])
+                    & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
+        assert (allowed_samples(shape, x, y, radii, directions, start, stop, margin) == expected).all()
 
 
 def test_edge_peaks_find_the_step_and_ignore_flat_rays():
