@@ -73,7 +73,10 @@ def test_foxglove_channels_decode_independently_and_play_skips_them(router, sess
     pixels = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_COLOR)
     assert pixels.shape == frame.shape and np.abs(pixels.astype(int) - frame).mean() < 4
 
-    located, truth = decoded["/scene"]
+    # the two scene updates come from two keys, so in either order
+    scenes = {update.entities[0].id: update for update in decoded["/scene"]}
+    assert sorted(scenes) == ["detected_ball", "true_balls"]
+    located, truth = scenes["detected_ball"], scenes["true_balls"]
     sphere = located.entities[0].spheres[0]
     assert located.entities[0].frame_id == "camera_optical"
     assert (sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z) == (0.1, -0.2, 1.5)
