@@ -125,6 +125,25 @@ def well_inside(x: float, y: float, reach: float, width: int, height: int) -> bo
     return reach + 1.0 <= min(x, y, width - 1.0 - x, height - 1.0 - y)
 
 
+def rim_samples(radius: float) -> int:
+    """How many points of a circle's rim the checks sample: about one per pixel, 24 to 96."""
+    return int(min(96, max(24, 2 * math.pi * radius)))
+
+
+def rim_points(x: float, y: float, radius: float, width: int, height: int) -> np.ndarray:
+    """Pixel pairs just inside and just outside a circle's rim, those in a ``width`` x
+    ``height`` frame: rows inner x, inner y, outer x, outer y, one column per rim sample."""
+    samples = rim_samples(radius)
+    offset = max(1.5, 0.15 * radius)
+    points = np.rint(np.array([[x], [y], [x], [y]])
+                     + np.array([[radius - offset], [radius - offset], [radius + offset],
+                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
+    if not well_inside(x, y, radius + offset, width, height):
+        in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
+        points = points[:, in_frame]
+    return points
+
+
 def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     """How a circle sits on ``mask`` (see MaskMetrics); None when too little of it can be judged.
 
@@ -132,15 +151,8 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     """
     height, width = mask.shape
     x, y, radius = candidate.x, candidate.y, candidate.radius
-    samples = int(min(96, max(24, 2 * math.pi * radius)))
-    offset = max(1.5, 0.15 * radius)
-    # Rows: inner x, inner y, outer x, outer y of each rim sample.
-    points = np.rint(np.array([[x], [y], [x], [y]])
-                     + np.array([[radius - offset], [radius - offset], [radius + offset],
-                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
-    if not well_inside(x, y, radius + offset, width, height):
-        in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
-        points = points[:, in_frame]
+    samples = rim_samples(radius)
+    points = rim_points(x, y, radius, width, height)
     inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
     known = (inner != EXPLAINED) & (outer != EXPLAINED)
     known_count = int(np.count_nonzero(known))

@@ -13,15 +13,13 @@ inside it, a dark side within it (``dark_side``) and the lit part of its rim a c
 """
 
 import dataclasses
-import math
 
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, measure_mask
+from balltrack.services.detector.checks import CandidateMetrics, measure_mask, rim_points
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import (Candidate, box_around, circle_overlap, disc,
-                                                   rim_directions)
+from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc
 from balltrack.services.detector.mask import EXPLAINED
 from balltrack.services.detector.outline import silhouette
 from balltrack.services.detector.proposals import FrameSearch
@@ -98,13 +96,7 @@ def lit_rim_support(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> flo
     """
     height, width = mask.shape
     x, y, radius = ball.x, ball.y, ball.radius
-    samples = int(min(96, max(24, 2 * math.pi * radius)))
-    offset = max(1.5, 0.15 * radius)
-    points = np.rint(np.array([[x], [y], [x], [y]])
-                     + np.array([[radius - offset], [radius - offset], [radius + offset],
-                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
-    in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
-    points = points[:, in_frame]
+    points = rim_points(x, y, radius, width, height)
     box = box_around(x, y, radius, width, height)
     if box is None or points.shape[1] == 0:
         return 0.0
