@@ -34,12 +34,13 @@ DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
 
 
 def foxglove_converter():
-    """The Foxglove conversions, or None without the foxglove-sdk package (the ``view`` extra)."""
+    """The Foxglove conversions (``deploy/foxglove_messages.py``), or None without the
+    foxglove-sdk package (the ``view`` extra)."""
     try:
-        from balltrack.deploy.foxglove_messages import RECORDED_TYPES, mcap_encoding, recorded_messages
+        from balltrack.deploy import foxglove_messages
     except ImportError:
         return None
-    return RECORDED_TYPES, recorded_messages, mcap_encoding
+    return foxglove_messages
 
 
 @dataclass
@@ -119,18 +120,17 @@ class Recording:
             return self._changed.wait_for(lambda: self.counts.received >= count, timeout)
 
     def _write_foxglove(self, topic: str, key: str, payload: bytes, arrival: int) -> None:
-        recorded_types, recorded_messages, mcap_encoding = self._foxglove
-        message_type = recorded_types.get(key)
+        message_type = self._foxglove.RECORDED_TYPES.get(key)
         if message_type is None:
             return
         try:
             message = decode(message_type, payload)
-            converted = recorded_messages(key, message)
+            converted = self._foxglove.recorded_messages(key, message)
         except MessageError:  # recorded as it came on its msgpack channel; nothing to view
             return
         prefix = f"/{self.keys.namespace}" if self.keys.namespace else ""
         for foxglove_topic, item in converted:
-            schema_name, schema_encoding, schema_data, encoding, data = mcap_encoding(item)
+            schema_name, schema_encoding, schema_data, encoding, data = self._foxglove.mcap_encoding(item)
             channel = self._foxglove_channels.get(prefix + foxglove_topic)
             if channel is None:
                 channel = self._foxglove_channels[prefix + foxglove_topic] = self.recorder.add_channel(

@@ -96,7 +96,7 @@ class Bridge:
                     handler, message, arrival = self._queued.popleft()
                 else:
                     (message, arrival), self._newest_frame = self._newest_frame, None
-                    handler = self._show_image
+                    handler = self.show_image
             try:
                 handler(message)
             except MessageError:
@@ -104,9 +104,6 @@ class Bridge:
                 continue
             self.handled += 1
             self.lags.append(time.monotonic() - arrival)
-
-    def _show_image(self, image: dict) -> None:
-        self.show_image(image)
 
     def show_image(self, image: dict) -> None:
         """The annotated frame; by default as JPEG bytes to :meth:`show_jpeg`."""
