@@ -85,11 +85,13 @@ def build(service: ServiceContext):
                 except MessageError as error:  # e.g. a photo larger than the contract allows
                     context.reject(context.keys(keys.IMAGE_RAW), f"frame {seq}: {error}")
                     continue
-                images.put(message)
+                # The camera_info first: a locator then knows the camera before the first
+                # detection made from this frame reaches it.
                 now = time.monotonic()
                 if now >= next_info:
                     infos.put(info)
                     next_info = now + 1.0
+                images.put(message)
                 context.stats.record_duration(time.perf_counter() - started)
         finally:
             reader.close()

@@ -352,7 +352,7 @@ class TestChase:
         # The window waited for above: later the ball, still rolling, may bump into the robot.
         window_end = last_command + timeout + braking + 0.5
         truths = [truth for truth in chase.truths.messages
-                  if last_command - 0.2 <= seconds(truth) <= window_end]
+                  if applied_at_least - 0.2 <= seconds(truth) <= window_end]
         pairs = list(zip(truths, truths[1:]))
         holding = [moved(a, b) for a, b in pairs if seconds(b) <= applied_at_least + timeout]
         stopped_at = next((seconds(a) for a, b in pairs if seconds(a) > last_command
