@@ -17,6 +17,7 @@ channels stay byte for byte, and only they are played back.
 """
 
 import collections
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -41,6 +42,16 @@ def foxglove_converter():
     except ImportError:
         return None
     return foxglove_messages
+
+
+def lower_priority() -> None:
+    """Make the calling thread yield the CPU to everything else (Linux: per-thread nice 19).
+    Compressing frames is background work; on a small machine it must not take a core from
+    the services whose messages it records while they work on a fresh frame."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+    except (AttributeError, OSError):  # not Linux, or not permitted: record at normal priority
+        pass
 
 
 @dataclass
@@ -96,6 +107,7 @@ class Recording:
             self._changed.notify_all()  # the writer, and wait_received
 
     def _write_queued(self) -> None:
+        lower_priority()
         while True:
             with self._changed:
                 self._changed.wait_for(lambda: self._pending)

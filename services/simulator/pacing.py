@@ -2,7 +2,8 @@
 
 Pure helpers (threading and arithmetic, no Zenoh), used by :mod:`services.simulator.service`:
 
-* :class:`RealtimePacer`: the wall time at which a frame is due in ``realtime`` pacing.
+* :class:`RealtimePacer`: the wall time at which a frame is due in ``realtime`` pacing, and
+  when to start making it (:class:`WorkEstimate`: how long making one takes).
 * :class:`TimerTicks` (from common.clock): which clock values make the follower's timer fire.
 * :class:`LockstepGate`: what the frame loop waits for in ``lockstep`` pacing (the detector's
   answer to a frame, the follower's command of a tick), fed by subscriber callbacks.
@@ -32,6 +33,15 @@ class RealtimePacer:
     def reset(self) -> None:
         self._anchor = None
 
+    def start_delay(self, sim_time: float, factor: float, now: float, lead: float) -> float:
+        """Wall seconds to wait before starting to make the frame at ``sim_time`` so that it is
+        ready ``lead`` seconds before it is due (0 when already that close, or with no schedule
+        yet). Unlike :meth:`delay` it neither anchors the schedule nor counts slips."""
+        if self._anchor is None or self._anchor[2] != factor or sim_time < self._anchor[1]:
+            return 0.0
+        wall, start, _ = self._anchor
+        return max(0.0, wall + (sim_time - start) / factor - now - lead)
+
     def delay(self, sim_time: float, factor: float, period: float, now: float) -> float:
         """Wall seconds to wait before publishing the frame at ``sim_time`` (0 when due)."""
         if self._anchor is None or self._anchor[2] != factor or sim_time < self._anchor[1]:
@@ -44,6 +54,24 @@ class RealtimePacer:
             self._anchor = (now, sim_time, factor)
             return 0.0
         return max(0.0, remaining)
+
+
+class WorkEstimate:
+    """A high percentile of how long recent frames took to make (step and render), the lead
+    with which a realtime frame is started before it is due."""
+
+    def __init__(self, window: int = 100, quantile: float = 0.9, margin: float = 0.002):
+        self._seconds: collections.deque = collections.deque(maxlen=window)
+        self._quantile, self._margin = quantile, margin
+
+    def add(self, seconds: float) -> None:
+        self._seconds.append(seconds)
+
+    def lead(self) -> float:
+        if not self._seconds:
+            return self._margin
+        ordered = sorted(self._seconds)
+        return ordered[min(len(ordered) - 1, int(self._quantile * len(ordered)))] + self._margin
 
 
 class LockstepGate:

@@ -2,6 +2,8 @@
 byte for byte, with the times and sequence numbers the README specifies."""
 
 import json
+import os
+import threading
 
 import msgpack
 import pytest
@@ -116,3 +118,20 @@ def test_missing_file_and_unwritable_path_are_one_line_errors(tmp_path):
         RecordingFile(tmp_path / "missing.mcap")
     with pytest.raises(RecordingError, match="cannot write"):
         Recorder(tmp_path / "no" / "such" / "folder.mcap")
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread nice is Linux's")
+def test_the_writer_thread_yields_the_cpu_and_only_it():
+    from balltrack.deploy.recording import lower_priority
+
+    seen = {}
+
+    def writer():
+        lower_priority()
+        seen["writer"] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    thread.join()
+    assert seen["writer"] == 19
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) < 19

@@ -6,7 +6,7 @@ import threading
 import pytest
 
 from balltrack.common.clock import TimerTicks
-from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer
+from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate
 
 PERIOD = 1 / 30
 
@@ -29,6 +29,30 @@ def test_realtime_deadlines_follow_sim_time_and_never_burst():
     assert pacer.delay(4 * PERIOD, 1.0, PERIOD, now=300.0 + 10 * PERIOD) == 0.0
     assert pacer.slips == 1
     assert pacer.delay(5 * PERIOD, 1.0, PERIOD, now=300.0 + 10 * PERIOD) == pytest.approx(PERIOD)
+
+
+def test_a_frame_is_started_its_lead_before_it_is_due_without_touching_the_schedule():
+    pacer = RealtimePacer()
+    assert pacer.start_delay(PERIOD, 1.0, now=100.0, lead=0.01) == 0.0  # no schedule yet
+    pacer.delay(PERIOD, 1.0, PERIOD, now=100.0)
+    # Frame 2 is due at 100 + PERIOD; made in 10 ms, it is started 10 ms before that.
+    assert pacer.start_delay(2 * PERIOD, 1.0, now=100.0, lead=0.01) == pytest.approx(PERIOD - 0.01)
+    assert pacer.start_delay(2 * PERIOD, 2.0, now=100.0, lead=0.01) == 0.0  # the rate changed
+    # Already within the lead, or late: start at once, and neither a slip nor a new anchor.
+    assert pacer.start_delay(2 * PERIOD, 1.0, now=100.0 + 5 * PERIOD, lead=0.01) == 0.0
+    assert pacer.slips == 0
+    assert pacer.delay(2 * PERIOD, 1.0, PERIOD, now=100.0) == pytest.approx(PERIOD)
+
+
+def test_the_lead_is_a_high_percentile_of_recent_work_plus_a_margin():
+    estimate = WorkEstimate(window=10, quantile=0.9, margin=0.002)
+    assert estimate.lead() == pytest.approx(0.002)
+    for milliseconds in (5, 6, 7, 8, 9, 10, 11, 12, 13, 30):
+        estimate.add(milliseconds / 1000)
+    assert estimate.lead() == pytest.approx(0.030 + 0.002)  # the 90th percentile of 10 is the top
+    for _ in range(10):  # the window forgets a slow start (the first renders compile shaders)
+        estimate.add(0.008)
+    assert estimate.lead() == pytest.approx(0.010)
 
 
 def test_timer_ticks_fire_on_the_first_clock_then_on_crossing_multiples():
