@@ -29,7 +29,7 @@ from balltrack.experiments.detector_speed import DEFAULT_PHOTOS
 from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
-               "distractors", "real_photos", "fuzz", "soak")
+               "distractors", "real_photos", "detector_speed", "latency", "fuzz", "soak")
 TRANSPORTS = ("auto", "in-process", "zenoh")
 
 

@@ -99,6 +99,54 @@ def measure(detectors: dict, frames: list[np.ndarray], repeats: int) -> dict[str
     return {name: figures(*measured) for name, measured in times.items()}
 
 
+NAME = "detector_speed"
+TITLE = "Detector speed against the paper's plain pipeline"
+
+
+def run(options) -> "ExperimentResult":
+    """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
+    photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
+    from balltrack.experiments.base import ExperimentResult, Stopwatch
+
+    clock = Stopwatch()
+    result = ExperimentResult(NAME, TITLE, mode="in-process", quick=options.quick)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        config = options.detector_config()
+        detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
+        sets = {"renders": simulator_frames(options.budget(30, 60))}
+        photos = options.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
+        if photos is not None and (frames := photo_frames(photos)):
+            sets["photos"] = frames
+        repeats = 60 if options.quick else 300
+        rows = []
+        for name, frames in sets.items():
+            measured = measure(detectors, frames, repeats)
+            for detector_name, figures_of in measured.items():
+                for metric, value in figures_of.items():
+                    result.figure(f"{name}/{detector_name}/{metric}", value)
+            plain, ours = measured["plain"]["wall_p50_ms"], measured["balltrack"]["wall_p50_ms"]
+            speedup = result.figure(f"{name}/ratio", plain / ours)
+            result.goal(name, f"{name} (640x480, one thread): the balltrack detector at least "
+                              f"{GOAL_RATIO:g}x as fast as the plain pipeline (wall p50)",
+                        f">= {GOAL_RATIO:g}x", f"{speedup:.2f}x ({plain:.2f} vs {ours:.2f} ms)",
+                        speedup >= GOAL_RATIO)
+            rows.append([name, len(frames),
+                         f"{plain:.2f} / {measured['plain']['wall_p90_ms']:.2f}",
+                         f"{ours:.2f} / {measured['balltrack']['wall_p90_ms']:.2f}", f"{speedup:.2f}"])
+        result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
+                      "plain / balltrack"], rows,
+                     f"Calls alternating on the same frames, {repeats} per detector and set, "
+                     "OpenCV on one thread:")
+        result.settings = {"photos": str(photos) if "photos" in sets else "none",
+                           "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}
+    finally:
+        cv2.setNumThreads(threads)
+    result.seconds = clock.seconds
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--photos", type=Path, default=None,

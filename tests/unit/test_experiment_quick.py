@@ -71,3 +71,20 @@ def test_bad_arguments_exit_2_with_one_line(arguments, tmp_path, capsys):
     assert exit_info.value.code == 2
     error = capsys.readouterr().err.strip()
     assert error.startswith("balltrack experiment:") and "\n" not in error
+
+
+def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
+    status = cli.main(["detector_speed", "--frames", "3", "--quick", "--out", str(tmp_path), "--no-progress"])
+    assert status == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    figures = results["figures"]
+    sets = ["renders"] + (["photos"] if "detector_speed/photos/ratio" in figures else [])
+    for name in sets:
+        plain = figures[f"detector_speed/{name}/plain/wall_p50_ms"]
+        ours = figures[f"detector_speed/{name}/balltrack/wall_p50_ms"]
+        assert plain > 0 and ours > 0
+        assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(plain / ours, rel=1e-5)
+    goals = {goal["name"]: goal for goal in results["goals"]}
+    assert set(goals) == {f"detector_speed/{name}" for name in sets}
+    for name in sets:
+        assert goals[f"detector_speed/{name}"]["passed"] == (figures[f"detector_speed/{name}/ratio"] >= 2.0)
