@@ -13,7 +13,8 @@ Into the run folder go the services' logs, ``video.mp4`` (the detector's annotat
 frames, ``image_out``, with the locator's 3D estimate written on them), ``trajectory.png``
 (the ball in the camera frame over time and the robot's path, like the paper's Fig. 8),
 ``velocity.png`` (linear and angular velocity over time, like its Fig. 6), ``frame.png``,
-``summary.json`` and ``run.mcap`` (the messages, for ``balltrack play`` and ``balltrack info``). Exit status 0 when the ball was reached, 1 otherwise.
+``summary.json`` and ``run.mcap`` (the messages, for ``balltrack play`` and ``balltrack info``,
+written by ``balltrack record`` in a process of its own, ``record.log``). Exit status 0 when the ball was reached, 1 otherwise.
 
 Latency is measured here, by wall-clock arrival times at this program's own subscriber: the
 simulator's header stamps are *simulated* time, so they cannot be compared with the wall
@@ -29,6 +30,7 @@ import math
 import os
 import queue
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -45,7 +47,7 @@ from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING
 from balltrack.common.session import ArgumentParser, open_session, secure_client_path
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.launcher import SERVICES, start_system
-from balltrack.deploy.recording import DEFAULT_KEYS, Recording
+from balltrack.deploy.recording import DEFAULT_KEYS
 
 DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
 # Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
@@ -266,6 +268,45 @@ class Observer:
             return result
 
 
+def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -> subprocess.Popen | None:
+    """``balltrack record`` into run.mcap, in a process of its own, once it has subscribed.
+
+    Compressing 30 frames a second holds the interpreter lock for milliseconds at a time (a
+    thread meaning to wake after 1 ms woke p99 3 ms, at worst 13 ms late beside the recording
+    writer): in this process that would delay the arrivals the demo times."""
+    command = [sys.executable, "-m", "balltrack", "record", "-o", str(run_dir / "run.mcap"),
+               "--connect", endpoint, *RECORDED_KEYS]
+    if args.namespace:
+        command += ["--namespace", args.namespace]
+    if args.secure:
+        command += ["--secure", str(args.secure)]  # as the demo: the operator role
+    log_path = run_dir / "record.log"
+    with open(log_path, "w") as log:
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    # `balltrack record` says "recording ..." once its subscribers are declared.
+    if wait_until(lambda: process.poll() is not None or "recording " in log_path.read_text(), 30, stop) \
+            and process.poll() is None:
+        return process
+    process.kill()
+    process.wait()
+    if not stop.is_set():
+        print(f"demo: the recorder did not start: {log_path.read_text().strip()[-300:]}", file=sys.stderr)
+    return None
+
+
+def stop_recording(process: subprocess.Popen, run_dir: Path) -> None:
+    """Interrupt the recorder, which writes what it holds and finishes run.mcap."""
+    process.send_signal(signal.SIGINT)
+    try:
+        process.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+    if process.returncode != 0:
+        print(f"demo: the recorder exited with status {process.returncode} (see {run_dir}/record.log)",
+              file=sys.stderr)
+
+
 def wait_until(predicate, timeout: float, stop: threading.Event) -> bool:
     deadline = time.monotonic() + timeout
     while not predicate():
@@ -313,7 +354,9 @@ def run(args) -> int:
         if video is not None:
             video.start()
         observer = Observer(session, args.namespace, referee, video)
-        recording = Recording(session, run_dir / "run.mcap", RECORDED_KEYS, args.namespace)
+        recording = start_recording(run_dir, endpoint, args, stop)
+        if recording is None:
+            return 1
         # The pipeline is up once the detector answers frames; then the scenario restarts so the
         # run starts with every service ready.
         if not wait_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
@@ -358,7 +401,7 @@ def run(args) -> int:
         if observer is not None:
             observer.close()
         if recording is not None:
-            recording.close()
+            stop_recording(recording, run_dir)
         if session is not None:
             session.close()
         if system is not None:
@@ -420,6 +463,8 @@ def write_outputs(run_dir: Path, observer: Observer | None, video: VideoWriter |
         plot_trajectory(run_dir / "trajectory.png", estimates, truths, f"balltrack demo: {title}")
         plot_velocity(run_dir / "velocity.png", commands, truths, f"balltrack demo: {title}")
         files.update(trajectory=str(run_dir / "trajectory.png"), velocity=str(run_dir / "velocity.png"))
+    if (run_dir / "run.mcap").is_file():
+        files["recording"] = str(run_dir / "run.mcap")
     if video is not None and video.written:
         import cv2
 

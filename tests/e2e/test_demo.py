@@ -35,3 +35,13 @@ def test_demo_reaches_the_ball_and_writes_its_outputs(tmp_path):
     for name in ("video.mp4", "trajectory.png", "velocity.png", "frame.png", "overview.png"):
         assert (run_dir / name).stat().st_size > 1000, name
     assert not list(run_dir.glob("*.pid"))
+    # run.mcap, written by the demo's recorder process: complete, with the chase in it.
+    info = subprocess.run([sys.executable, "-m", "balltrack", "info", str(run_dir / "run.mcap"), "--json"],
+                          cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0, info.stderr
+    recorded = json.loads(info.stdout)
+    counts = {entry["key"]: entry["count"] for entry in recorded["keys"]}
+    assert recorded["complete"] and summary["files"]["recording"] == str(run_dir / "run.mcap")
+    for key in ("camera/image_raw", "detected_ball_3d", "cmd_vel"):  # it started before the chase
+        assert counts.get(key, 0) >= 0.9 * summary["messages"][key], (key, counts, summary["messages"])
+    assert counts["/camera/image"] == counts["camera/image_raw"]  # each frame also for Foxglove
