@@ -1,8 +1,8 @@
 """Reaction time in the demo: frame -> ``detected_ball_3d`` and frame -> ``cmd_vel``.
 
 Runs the demo (``deploy/demo.py``: router, simulator in real time at 30 Hz, detector, locator,
-follower, each its own process, and the demo's own subscriber recording ``run.mcap``) once per
-follower mode and reads the latencies it measured, by wall-clock arrival at its subscriber of a
+follower and ``balltrack record`` writing ``run.mcap``, each its own process) once per follower
+mode and reads the latencies it measured, by wall-clock arrival at its subscriber of a
 frame and of what was derived from it (same ``seq``):
 
 * ``event``: the follower commands on each detection (``command_on_detection=true``, issue 9's
