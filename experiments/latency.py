@@ -63,6 +63,7 @@ def run(options) -> "ExperimentResult":
                 result.figure(f"{mode}/{key}/{metric}", latency[key][metric])
         result.figure(f"{mode}/detector_handler_p50_ms", detector_ms)
         result.figure(f"{mode}/render_ms", stats.get("simulator", {}).get("render_ms"))
+        result.figure(f"{mode}/cmd_vel_per_s", summary["messages_per_s"].get("cmd_vel"))
         rows.append([mode, "yes" if summary["reached"] else "no",
                      f"{latency['detected_ball_3d']['p50_ms']:.1f} / {latency['detected_ball_3d']['p99_ms']:.1f}",
                      f"{latency['cmd_vel']['p50_ms']:.1f} / {latency['cmd_vel']['p99_ms']:.1f}",
