@@ -2,7 +2,8 @@
 
 1. Brightness: the frame's reference level (99th percentile of V, at most 3x its median) is
    measured; a dark frame is scaled up to ``gain_target`` before anything else, so that the
-   blur keeps the colour information that uint8 rounding would otherwise destroy.
+   blur keeps the colour information that uint8 rounding would otherwise destroy. Pixels the
+   gain would clip keep their colour (``brighten``).
 2. Gaussian blur, then HSV; adaptive histogram equalisation (CLAHE) of V, which the
    ``v_min``/``v_max`` test uses, so that test is relative to the local brightness. Hue and
    saturation do not depend on brightness: a dark ball keeps its colour.
@@ -92,6 +93,28 @@ def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> f
     return float(max(1.0, min(float(bright), 3.0 * float(median))))
 
 
+def brighten(image_bgr: np.ndarray, gain: float, small: np.ndarray) -> np.ndarray:
+    """``image_bgr`` times ``gain``, keeping each pixel's colour: a pixel whose brightest
+    channel would pass 255 is scaled only up to 255.
+
+    The gain of a dark frame is set by its dark surroundings; clipping each channel alone would
+    turn a brightly lit ball in it white (yellow-green's red and green both clip), and its
+    hue and saturation are what the colour mask reads. ``small``: the frame's
+    ``quarter_sample``, whose brightest pixel tells whether anything may clip.
+    """
+    gained = cv2.convertScaleAbs(image_bgr, alpha=gain)
+    if float(small.max()) * gain <= 255.0:
+        return gained
+    value = cv2.max(cv2.max(cv2.extractChannel(image_bgr, 0), cv2.extractChannel(image_bgr, 1)),
+                    cv2.extractChannel(image_bgr, 2))
+    rows, columns = np.nonzero(value > 255.0 / gain)
+    if rows.size:
+        pixels = image_bgr[rows, columns].astype(np.float32)
+        scale = 255.0 / value[rows, columns].astype(np.float32)
+        gained[rows, columns] = np.rint(pixels * scale[:, None]).astype(np.uint8)
+    return gained
+
+
 def frame_gain(reference: float, config: DetectorConfig) -> float:
     """The dark-frame gain that brings ``reference`` up to gain_target (1 = none)."""
     if config.max_gain > 1.0:
@@ -125,7 +148,7 @@ class ColourMasker:
         gain = frame_gain(reference, config)
         # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
         # sub-unit colour information that uint8 rounding would otherwise destroy.
-        gained = cv2.convertScaleAbs(image_bgr, alpha=gain) if gain > 1.0 else image_bgr
+        gained = brighten(image_bgr, gain, small) if gain > 1.0 else image_bgr
         # Extremely dark frames (gain of at least dark_gain): the colour is only a grey level
         # or two above black, so single pixels' hue and chroma are rounding noise; colour is
         # classified on wider averages instead (dark_blur_kernel), with its own chroma floor,
@@ -135,7 +158,7 @@ class ColourMasker:
         if not dark and regions_apply(gained.shape):
             # (nearest-neighbour sampling commutes with the per-pixel gain: the regions' coarse
             # search reads the same sample of the gained frame)
-            small_gained = cv2.convertScaleAbs(small, alpha=gain) if gain > 1.0 else small
+            small_gained = brighten(small, gain, small) if gain > 1.0 else small
             found = self._mask_in_regions(gained, gain, small_gained)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
