@@ -56,8 +56,9 @@ class DetectorConfig:
     blur_kernel: int = param(5, "Gaussian blur kernel (odd px); 1 = no blur", low=1)
     clahe_clip_limit: float = param(2.0, "CLAHE contrast limit on V; 0 = no CLAHE", low=0)
     clahe_tile_grid: int = param(8, "CLAHE tiles per side", low=1)
-    # The frame's reference level is the 99th percentile of V, at most 3x its median. Hue and
-    # saturation do not depend on the gain; it keeps the blur precise and V comparable.
+    # The frame's reference level is the 99th percentile of V (of small areas, not single
+    # pixels), at most 3x its median. Hue and saturation do not depend on the gain; it keeps the
+    # blur precise and V comparable.
     gain_target: float = param(100.0, "dark frames are brightened until their reference level reaches "
                                       "this (0-255)", low=1, high=255)
     max_gain: float = param(64.0, "largest brightening factor; 1 = off", low=1)

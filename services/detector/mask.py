@@ -1,9 +1,9 @@
 """The colour mask: steps 1-4 of the detector (see ``detector.py``).
 
-1. Brightness: the frame's reference level (99th percentile of V, at most 3x its median) is
-   measured; a dark frame is scaled up to ``gain_target`` before anything else, so that the
-   blur keeps the colour information that uint8 rounding would otherwise destroy. Pixels the
-   gain would clip keep their colour (``brighten``).
+1. Brightness: the frame's reference level (99th percentile of V over small areas, at most 3x
+   its median) is measured; a dark frame is scaled up to ``gain_target`` before anything else,
+   so that the blur keeps the colour information that uint8 rounding would otherwise
+   destroy. Pixels the gain would clip keep their colour (``brighten``).
 2. Gaussian blur, then HSV; adaptive histogram equalisation (CLAHE) of V, which the
    ``v_min``/``v_max`` test uses, so that test is relative to the local brightness. Hue and
    saturation do not depend on brightness: a dark ball keeps its colour.
@@ -31,6 +31,9 @@ from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_S
                                                  doubled_part, grown_box, regions_apply,
                                                  source_span)
 
+# The reference level's bright end is that of 3x3 areas of the frame's quarter sample (12x12
+# pixels of the frame).
+AREA_KERNEL = np.ones((3, 3), np.uint8)
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
 EXPLAINED = 128
 
@@ -78,7 +81,8 @@ def quarter_sample(image_bgr: np.ndarray) -> np.ndarray:
 
 
 def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> float:
-    """The frame's bright level: 99th percentile of V, but at most 3x its median.
+    """The frame's bright level: 99th percentile of V over 3x3 areas (of the sample), but at
+    most 3x its median.
 
     The cap keeps a small bright area (the sky above a dimly lit floor, a lamp) from
     setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample
@@ -86,10 +90,13 @@ def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> f
     """
     if small is None:
         small = quarter_sample(image_bgr)
-    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2]).ravel()
+    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2])
     last = value.size - 1
-    ranks = [last // 2, int(0.99 * last)]
-    median, bright = np.partition(value, ranks)[ranks]
+    median = np.partition(value.ravel(), last // 2)[last // 2]
+    # The bright level of areas, not of single pixels: isolated glints, hot pixels and
+    # salt noise would otherwise make every colour in the frame look dull.
+    areas = cv2.erode(value, AREA_KERNEL).ravel()
+    bright = np.partition(areas, int(0.99 * last))[int(0.99 * last)]
     return float(max(1.0, min(float(bright), 3.0 * float(median))))
 
 

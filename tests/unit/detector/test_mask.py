@@ -41,6 +41,16 @@ def test_reference_level_is_the_bright_level_capped_by_the_median():
     assert reference_level(sky) == 30.0
 
 
+def test_reference_level_ignores_isolated_bright_pixels():
+    # salt noise on 3 % of a mid-grey frame (JPEG glints, hot pixels): the level is the grey's
+    frame = np.full((240, 320, 3), 90, np.uint8)
+    frame[::6, ::6] = 255
+    assert reference_level(frame) == 90.0
+    # a bright area keeps its level
+    frame[:, :100] = 120
+    assert reference_level(frame) == 120.0
+
+
 def test_frame_gain_brings_dark_frames_to_the_target():
     config = DetectorConfig()  # gain_target 100, max_gain 64
     assert frame_gain(200.0, config) == 1.0      # bright frames are not darkened
