@@ -258,7 +258,7 @@ class BallDetector:
         config = self.config
         for candidate, metrics in measured:
             candidate.score = judge(metrics, config) or 0.0
-        pending = sorted(without_contained(measured), key=lambda item: item[0].score, reverse=True)
+        pending = sorted(without_contained(measured), key=acceptance_order, reverse=True)
         accepted: list[Candidate] = []
         explained = search.mask
         still: list[Measured] = []
@@ -293,7 +293,7 @@ class BallDetector:
                     metrics = dataclasses.replace(metrics, mask=remeasured)
                 pending.append((candidate, metrics))
             pending.extend(self._leftover_candidates(newly, explained, search))
-            pending.sort(key=lambda item: item[0].score, reverse=True)
+            pending.sort(key=acceptance_order, reverse=True)
         accepted.sort(key=lambda c: c.score, reverse=True)
         accepted = accepted[:config.max_detections]
         accepted = self._outlines(accepted, still, explained, search)
@@ -330,6 +330,14 @@ class BallDetector:
                     candidate.score = judge(metrics, self.config) or 0.0
                 results.extend(found)
         return results
+
+
+def acceptance_order(item: Measured) -> tuple[bool, float]:
+    """Sort key of candidates, best first: balls of at least small_radius before smaller ones,
+    then by score. A few pixels of colour prove less than a whole ball does, so a speck
+    on a ball's rim, however well it scores, must not suppress the ball by overlap."""
+    candidate, metrics = item
+    return metrics.size >= 1.0, candidate.score
 
 
 def without_contained(measured: list[Measured]) -> list[Measured]:
