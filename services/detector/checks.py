@@ -30,9 +30,11 @@ CORNER_LEAK = 0.08
 # A candidate that is plainly a ball by shape (clean, an edge this even, at least
 # SURE_SIZE times small_radius for the evenness to mean something) needs only its colour in
 # the hue range, not hue_margin inside it: a ball under a warm lamp is yellower than felt in
-# daylight.
+# daylight. It needs only SURE_COLOURFULNESS of min_colourfulness too: a ball in dim light
+# beside a lamp or a lit screen is dull next to the frame's bright level.
 SURE_SPREAD = 0.05
 SURE_SIZE = 2.0
+SURE_COLOURFULNESS = 0.75
 # Samples along each ray when measuring how round a blob's edge is.
 EDGE_STEPS = 25
 
@@ -246,6 +248,8 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     """
     on_mask, colour = metrics.mask, metrics.colour
     clutter = on_mask.leak + on_mask.outside
+    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
+    colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
     # A circle cut by the frame edge must still show as much rim as a whole ball of
     # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
     # than that must be whole, and have its outline found (see BallDetector._outlines).
@@ -253,12 +257,11 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
             or on_mask.fill < config.min_fill_ratio
             or on_mask.support < config.min_edge_support + clutter
             or on_mask.outside > config.max_outside_ratio
-            or colour.colourfulness < config.min_colourfulness):
+            or colour.colourfulness < colourfulness_floor):
         return None
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
         return None
     # (the mask pixels' mean: a two-colour ball's other half does not count)
-    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
     if (config.hue_margin > 0 and not sure_by_shape
             and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
         return None

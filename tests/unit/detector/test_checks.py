@@ -147,6 +147,12 @@ def test_judge_accepts_what_the_rejections_border_on():
     assert judge(CandidateMetrics(GOOD_MASK, warm, size=3.0), config) is not None
     assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), warm, size=3.0), config) is None
     assert judge(CandidateMetrics(GOOD_MASK, warm, size=1.5), config) is None
+    # and its colour may be duller next to the frame's bright level (a lamp, a lit screen)
+    dull = dataclasses.replace(GOOD_COLOUR, colourfulness=0.8 * config.min_colourfulness)
+    assert judge(CandidateMetrics(GOOD_MASK, dull, size=3.0), config) is not None
+    assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), dull, size=3.0), config) is None
+    assert judge(CandidateMetrics(GOOD_MASK, dataclasses.replace(dull, colourfulness=0.2), size=3.0),
+                 config) is None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None
 
