@@ -72,6 +72,7 @@ class CandidateMetrics:
     colour: ColourMetrics
     size: float               # radius over small_radius: below 1, a small ball
     dark_side: bool = False   # accepted by the dark-side second look (dark.py)
+    highlighted: bool = False  # measured with its washed-out highlight (highlight.py)
 
     @property
     def clean(self) -> bool:
@@ -267,7 +268,9 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
     # circle in places (a box face); a ball's edge is even, its neighbours add no spread.
-    if on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
+    # (Not with a joined highlight: glints of bright ground poke out of it too, and white
+    # areas around a candidate already fail its leak and outside checks.)
+    if not metrics.highlighted and on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
         return None
     score = (on_mask.fill + on_mask.support - clutter) / 2.0
     score = max(0.0, min(1.0, score))

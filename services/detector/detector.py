@@ -11,7 +11,9 @@ module of this package:
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
-   the mean colour, roundness) and judges it.
+   the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
+   that fails again with the pale, bright pixels around it joined to the mask (a washed-out
+   highlight that leaves only a crescent of colour).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
    touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
@@ -49,6 +51,7 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
+from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_proposals,
@@ -182,6 +185,12 @@ class BallDetector:
                 continue
             metrics = CandidateMetrics(mask=on_mask, colour=colour_stats(candidate, search.planes),
                                        size=candidate.radius / search.small_radius)
+            if needs_highlight(metrics, self.config) and judge(metrics, self.config) is None:
+                joined = highlight_metrics(candidate, mask, search.planes, self.config)
+                if joined is not None:
+                    highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
+                    if judge(highlighted, self.config) is not None:
+                        metrics = highlighted
             results.append((candidate, metrics))
         return results
 
@@ -290,7 +299,8 @@ class BallDetector:
                     remeasured = measure_mask(candidate, explained)
                     if remeasured is None:
                         continue
-                    metrics = dataclasses.replace(metrics, mask=remeasured)
+                    # (on the colour mask alone: a highlight joined to it is measured once)
+                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False)
                 pending.append((candidate, metrics))
             pending.extend(self._leftover_candidates(newly, explained, search))
             pending.sort(key=acceptance_order, reverse=True)
