@@ -97,7 +97,8 @@ class DetectorConfig:
     hue_margin: float = param(3.0, "the mean colour of a candidate's colour-mask pixels must lie this far "
                                    "inside the hue range (OpenCV H units), unless its shape alone makes it "
                                    "plainly a ball", low=0, high=45)
-    max_detections: int = param(16, "most balls reported per frame (largest first)", low=1)
+    # A court or floor strewn with balls shows a few dozen at once (up to 30 in the floor photos).
+    max_detections: int = param(32, "most balls reported per frame (largest first)", low=1)
 
     # Shrinking is for speed.
     work_width: int = param(640, "wider frames are shrunk to this before processing (px); 0 = full size",
