@@ -23,10 +23,12 @@ from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 # candidate's mean colour is checked as well.
 LOW_CHROMA = 6.0
 # A candidate with a spread of its edge distance above CORNER_SPREAD (a square's is ~0.1, a
-# ball's mostly below 0.06 and at most 0.09 on the real dev photos) that also leaks past its
-# rim in places (corners) is a polygon, not a ball.
+# ball's mostly below 0.06 and at most 0.11 on the real dev photos) that also leaks past its
+# rim in CORNER_RUNS or more separate places (corners) is a polygon, not a ball; a ball's
+# mask leaks in one or two (a touching neighbour, its shadow, a smear of motion blur).
 CORNER_SPREAD = 0.07
 CORNER_LEAK = 0.08
+CORNER_RUNS = 3
 # A candidate that is plainly a ball by shape (clean, an edge this even, at least
 # SURE_SIZE times small_radius for the evenness to mean something) needs only its colour in
 # the hue range, not hue_margin inside it: a ball under a warm lamp is yellower than felt in
@@ -49,6 +51,7 @@ class MaskMetrics:
     fill: float      # mask fraction of the disc of 0.85 r
     outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
     spread: float    # spread of the mask edge's distance from the centre, over the radius
+    leak_runs: int = 0  # separate stretches of the rim where the mask goes on past it
 
 
 @dataclass(frozen=True)
@@ -184,13 +187,19 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     if inside_count == 0:
         return None
     ring_count = cv2.countNonZero(ring)
+    leak_count = int(np.count_nonzero(outer_on))
+    leak_runs = 0
+    if leak_count:  # (rim samples run round the circle: the last is next to the first)
+        leak_runs = max(1, int(np.count_nonzero(outer_on[1:] & ~outer_on[:-1]))
+                        + int(outer_on[0] and not outer_on[-1]))
     return MaskMetrics(
         visible=known_count / samples,
         support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
-        leak=float(np.count_nonzero(outer_on)) / known_count,
+        leak=leak_count / known_count,
         fill=cv2.countNonZero(on & inside) / inside_count,
         outside=cv2.countNonZero(on & ring) / ring_count if ring_count else 0.0,
-        spread=roundness)
+        spread=roundness,
+        leak_runs=leak_runs)
 
 
 def mean_hue(bgr) -> float:
@@ -267,10 +276,12 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
             and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
-    # circle in places (a box face); a ball's edge is even, its neighbours add no spread.
+    # circle in several places (a box face); a ball's edge is even, its neighbours add no
+    # spread, and what leaks past its rim does so in one or two places.
     # (Not with a joined highlight: glints of bright ground poke out of it too, and white
     # areas around a candidate already fail its leak and outside checks.)
-    if not metrics.highlighted and on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
+    if (not metrics.highlighted and on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK
+            and on_mask.leak_runs >= CORNER_RUNS):
         return None
     score = (on_mask.fill + on_mask.support - clutter) / 2.0
     score = max(0.0, min(1.0, score))
