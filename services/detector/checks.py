@@ -23,16 +23,20 @@ from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 # candidate's mean colour is checked as well.
 LOW_CHROMA = 6.0
 # A candidate with a spread of its edge distance above CORNER_SPREAD (a square's is ~0.1, a
-# ball's mostly below 0.06 and at most 0.09 on the real dev photos) that also leaks past its
-# rim in places (corners) is a polygon, not a ball.
+# ball's mostly below 0.06 and at most 0.11 on the real dev photos) that also leaks past its
+# rim in CORNER_RUNS or more separate places (corners) is a polygon, not a ball; a ball's
+# mask leaks in one or two (a touching neighbour, its shadow, a smear of motion blur).
 CORNER_SPREAD = 0.07
 CORNER_LEAK = 0.08
+CORNER_RUNS = 3
 # A candidate that is plainly a ball by shape (clean, an edge this even, at least
 # SURE_SIZE times small_radius for the evenness to mean something) needs only its colour in
 # the hue range, not hue_margin inside it: a ball under a warm lamp is yellower than felt in
-# daylight.
+# daylight. It needs only SURE_COLOURFULNESS of min_colourfulness too: a ball in dim light
+# beside a lamp or a lit screen is dull next to the frame's bright level.
 SURE_SPREAD = 0.05
 SURE_SIZE = 2.0
+SURE_COLOURFULNESS = 0.75
 # Samples along each ray when measuring how round a blob's edge is.
 EDGE_STEPS = 25
 
@@ -47,6 +51,7 @@ class MaskMetrics:
     fill: float      # mask fraction of the disc of 0.85 r
     outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
     spread: float    # spread of the mask edge's distance from the centre, over the radius
+    leak_runs: int = 0  # separate stretches of the rim where the mask goes on past it
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,7 @@ class CandidateMetrics:
     colour: ColourMetrics
     size: float               # radius over small_radius: below 1, a small ball
     dark_side: bool = False   # accepted by the dark-side second look (dark.py)
+    highlighted: bool = False  # measured with its washed-out highlight (highlight.py)
 
     @property
     def clean(self) -> bool:
@@ -181,13 +187,19 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     if inside_count == 0:
         return None
     ring_count = cv2.countNonZero(ring)
+    leak_count = int(np.count_nonzero(outer_on))
+    leak_runs = 0
+    if leak_count:  # (rim samples run round the circle: the last is next to the first)
+        leak_runs = max(1, int(np.count_nonzero(outer_on[1:] & ~outer_on[:-1]))
+                        + int(outer_on[0] and not outer_on[-1]))
     return MaskMetrics(
         visible=known_count / samples,
         support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
-        leak=float(np.count_nonzero(outer_on)) / known_count,
+        leak=leak_count / known_count,
         fill=cv2.countNonZero(on & inside) / inside_count,
         outside=cv2.countNonZero(on & ring) / ring_count if ring_count else 0.0,
-        spread=roundness)
+        spread=roundness,
+        leak_runs=leak_runs)
 
 
 def mean_hue(bgr) -> float:
@@ -246,6 +258,8 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     """
     on_mask, colour = metrics.mask, metrics.colour
     clutter = on_mask.leak + on_mask.outside
+    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
+    colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
     # A circle cut by the frame edge must still show as much rim as a whole ball of
     # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
     # than that must be whole, and have its outline found (see BallDetector._outlines).
@@ -253,18 +267,21 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
             or on_mask.fill < config.min_fill_ratio
             or on_mask.support < config.min_edge_support + clutter
             or on_mask.outside > config.max_outside_ratio
-            or colour.colourfulness < config.min_colourfulness):
+            or colour.colourfulness < colourfulness_floor):
         return None
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
         return None
     # (the mask pixels' mean: a two-colour ball's other half does not count)
-    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
     if (config.hue_margin > 0 and not sure_by_shape
             and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
-    # circle in places (a box face); a ball's edge is even, its neighbours add no spread.
-    if on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
+    # circle in several places (a box face); a ball's edge is even, its neighbours add no
+    # spread, and what leaks past its rim does so in one or two places.
+    # (Not with a joined highlight: glints of bright ground poke out of it too, and white
+    # areas around a candidate already fail its leak and outside checks.)
+    if (not metrics.highlighted and on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK
+            and on_mask.leak_runs >= CORNER_RUNS):
         return None
     score = (on_mask.fill + on_mask.support - clutter) / 2.0
     score = max(0.0, min(1.0, score))

@@ -56,8 +56,9 @@ class DetectorConfig:
     blur_kernel: int = param(5, "Gaussian blur kernel (odd px); 1 = no blur", low=1)
     clahe_clip_limit: float = param(2.0, "CLAHE contrast limit on V; 0 = no CLAHE", low=0)
     clahe_tile_grid: int = param(8, "CLAHE tiles per side", low=1)
-    # The frame's reference level is the 99th percentile of V, at most 3x its median. Hue and
-    # saturation do not depend on the gain; it keeps the blur precise and V comparable.
+    # The frame's reference level is the 99th percentile of V (of small areas, not single
+    # pixels), at most 3x its median. Hue and saturation do not depend on the gain; it keeps the
+    # blur precise and V comparable.
     gain_target: float = param(100.0, "dark frames are brightened until their reference level reaches "
                                       "this (0-255)", low=1, high=255)
     max_gain: float = param(64.0, "largest brightening factor; 1 = off", low=1)
@@ -96,7 +97,8 @@ class DetectorConfig:
     hue_margin: float = param(3.0, "the mean colour of a candidate's colour-mask pixels must lie this far "
                                    "inside the hue range (OpenCV H units), unless its shape alone makes it "
                                    "plainly a ball", low=0, high=45)
-    max_detections: int = param(16, "most balls reported per frame (largest first)", low=1)
+    # A court or floor strewn with balls shows a few dozen at once (up to 30 in the floor photos).
+    max_detections: int = param(32, "most balls reported per frame (largest first)", low=1)
 
     # Shrinking is for speed.
     work_width: int = param(640, "wider frames are shrunk to this before processing (px); 0 = full size",

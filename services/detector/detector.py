@@ -11,7 +11,9 @@ module of this package:
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
-   the mean colour, roundness) and judges it.
+   the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
+   that fails again with the pale, bright pixels around it joined to the mask (a washed-out
+   highlight that leaves only a crescent of colour).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
    touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
@@ -49,6 +51,7 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
+from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_proposals,
@@ -182,6 +185,12 @@ class BallDetector:
                 continue
             metrics = CandidateMetrics(mask=on_mask, colour=colour_stats(candidate, search.planes),
                                        size=candidate.radius / search.small_radius)
+            if needs_highlight(metrics, self.config) and judge(metrics, self.config) is None:
+                joined = highlight_metrics(candidate, mask, search.planes, self.config)
+                if joined is not None:
+                    highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
+                    if judge(highlighted, self.config) is not None:
+                        metrics = highlighted
             results.append((candidate, metrics))
         return results
 
@@ -258,7 +267,7 @@ class BallDetector:
         config = self.config
         for candidate, metrics in measured:
             candidate.score = judge(metrics, config) or 0.0
-        pending = sorted(without_contained(measured), key=lambda item: item[0].score, reverse=True)
+        pending = sorted(without_contained(measured), key=acceptance_order, reverse=True)
         accepted: list[Candidate] = []
         explained = search.mask
         still: list[Measured] = []
@@ -290,10 +299,11 @@ class BallDetector:
                     remeasured = measure_mask(candidate, explained)
                     if remeasured is None:
                         continue
-                    metrics = dataclasses.replace(metrics, mask=remeasured)
+                    # (on the colour mask alone: a highlight joined to it is measured once)
+                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False)
                 pending.append((candidate, metrics))
             pending.extend(self._leftover_candidates(newly, explained, search))
-            pending.sort(key=lambda item: item[0].score, reverse=True)
+            pending.sort(key=acceptance_order, reverse=True)
         accepted.sort(key=lambda c: c.score, reverse=True)
         accepted = accepted[:config.max_detections]
         accepted = self._outlines(accepted, still, explained, search)
@@ -330,6 +340,14 @@ class BallDetector:
                     candidate.score = judge(metrics, self.config) or 0.0
                 results.extend(found)
         return results
+
+
+def acceptance_order(item: Measured) -> tuple[bool, float]:
+    """Sort key of candidates, best first: balls of at least small_radius before smaller ones,
+    then by score. A few pixels of colour prove less than a whole ball does, so a speck
+    on a ball's rim, however well it scores, must not suppress the ball by overlap."""
+    candidate, metrics = item
+    return metrics.size >= 1.0, candidate.score
 
 
 def without_contained(measured: list[Measured]) -> list[Measured]:

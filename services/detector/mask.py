@@ -1,8 +1,9 @@
 """The colour mask: steps 1-4 of the detector (see ``detector.py``).
 
-1. Brightness: the frame's reference level (99th percentile of V, at most 3x its median) is
-   measured; a dark frame is scaled up to ``gain_target`` before anything else, so that the
-   blur keeps the colour information that uint8 rounding would otherwise destroy.
+1. Brightness: the frame's reference level (99th percentile of V over small areas, at most 3x
+   its median) is measured; a dark frame is scaled up to ``gain_target`` before anything else,
+   so that the blur keeps the colour information that uint8 rounding would otherwise
+   destroy. Pixels the gain would clip keep their colour (``brighten``).
 2. Gaussian blur, then HSV; adaptive histogram equalisation (CLAHE) of V, which the
    ``v_min``/``v_max`` test uses, so that test is relative to the local brightness. Hue and
    saturation do not depend on brightness: a dark ball keeps its colour.
@@ -30,6 +31,9 @@ from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_S
                                                  doubled_part, grown_box, regions_apply,
                                                  source_span)
 
+# The reference level's bright end is that of 3x3 areas of the frame's quarter sample (12x12
+# pixels of the frame).
+AREA_KERNEL = np.ones((3, 3), np.uint8)
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
 EXPLAINED = 128
 
@@ -77,7 +81,8 @@ def quarter_sample(image_bgr: np.ndarray) -> np.ndarray:
 
 
 def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> float:
-    """The frame's bright level: 99th percentile of V, but at most 3x its median.
+    """The frame's bright level: 99th percentile of V over 3x3 areas (of the sample), but at
+    most 3x its median.
 
     The cap keeps a small bright area (the sky above a dimly lit floor, a lamp) from
     setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample
@@ -85,11 +90,36 @@ def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> f
     """
     if small is None:
         small = quarter_sample(image_bgr)
-    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2]).ravel()
+    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2])
     last = value.size - 1
-    ranks = [last // 2, int(0.99 * last)]
-    median, bright = np.partition(value, ranks)[ranks]
+    median = np.partition(value.ravel(), last // 2)[last // 2]
+    # The bright level of areas, not of single pixels: isolated glints, hot pixels and
+    # salt noise would otherwise make every colour in the frame look dull.
+    areas = cv2.erode(value, AREA_KERNEL).ravel()
+    bright = np.partition(areas, int(0.99 * last))[int(0.99 * last)]
     return float(max(1.0, min(float(bright), 3.0 * float(median))))
+
+
+def brighten(image_bgr: np.ndarray, gain: float, small: np.ndarray) -> np.ndarray:
+    """``image_bgr`` times ``gain``, keeping each pixel's colour: a pixel whose brightest
+    channel would pass 255 is scaled only up to 255.
+
+    The gain of a dark frame is set by its dark surroundings; clipping each channel alone would
+    turn a brightly lit ball in it white (yellow-green's red and green both clip), and its
+    hue and saturation are what the colour mask reads. ``small``: the frame's
+    ``quarter_sample``, whose brightest pixel tells whether anything may clip.
+    """
+    gained = cv2.convertScaleAbs(image_bgr, alpha=gain)
+    if float(small.max()) * gain <= 255.0:
+        return gained
+    value = cv2.max(cv2.max(cv2.extractChannel(image_bgr, 0), cv2.extractChannel(image_bgr, 1)),
+                    cv2.extractChannel(image_bgr, 2))
+    rows, columns = np.nonzero(value > 255.0 / gain)
+    if rows.size:
+        pixels = image_bgr[rows, columns].astype(np.float32)
+        scale = 255.0 / value[rows, columns].astype(np.float32)
+        gained[rows, columns] = np.rint(pixels * scale[:, None]).astype(np.uint8)
+    return gained
 
 
 def frame_gain(reference: float, config: DetectorConfig) -> float:
@@ -125,7 +155,7 @@ class ColourMasker:
         gain = frame_gain(reference, config)
         # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
         # sub-unit colour information that uint8 rounding would otherwise destroy.
-        gained = cv2.convertScaleAbs(image_bgr, alpha=gain) if gain > 1.0 else image_bgr
+        gained = brighten(image_bgr, gain, small) if gain > 1.0 else image_bgr
         # Extremely dark frames (gain of at least dark_gain): the colour is only a grey level
         # or two above black, so single pixels' hue and chroma are rounding noise; colour is
         # classified on wider averages instead (dark_blur_kernel), with its own chroma floor,
@@ -135,7 +165,7 @@ class ColourMasker:
         if not dark and regions_apply(gained.shape):
             # (nearest-neighbour sampling commutes with the per-pixel gain: the regions' coarse
             # search reads the same sample of the gained frame)
-            small_gained = cv2.convertScaleAbs(small, alpha=gain) if gain > 1.0 else small
+            small_gained = brighten(small, gain, small) if gain > 1.0 else small
             found = self._mask_in_regions(gained, gain, small_gained)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],

@@ -68,6 +68,12 @@ def test_a_square_has_corners():
     assert edge_spread(160.0, 120.0, 40.0, disc(SHAPE, 160.0, 120.0, 40.0), 96) < 0.03
     metrics = measure_mask(candidate, square)
     assert metrics.spread > CORNER_SPREAD
+    # its four corners poke out of the circle in four places
+    assert metrics.leak_runs == 4
+    # a disc with a neighbour touching it leaks in one
+    pair = disc(SHAPE, 160.0, 120.0, 40.0) | disc(SHAPE, 230.0, 120.0, 30.0)
+    assert measure_mask(Candidate(160.0, 120.0, 40.0), pair).leak_runs == 1
+    assert measure_mask(Candidate(160.0, 120.0, 40.0), disc(SHAPE, 160.0, 120.0, 40.0)).leak_runs == 0
     # too few rays with an edge: nothing to measure the spread on
     assert edge_spread(160.0, 120.0, 40.0, np.zeros(SHAPE, np.uint8), 96) == 0.0
 
@@ -119,7 +125,7 @@ def test_judge_scores_a_ball():
     ({}, {"mean_chroma": 3.0, "mean_hue": 15.0}, 3.0),  # dim, and the mean colour is orange
     ({"spread": 0.06}, {"colour_hue": 26.0}, 3.0),     # its colour at the orange end (wood, skin)
     ({"spread": 0.06}, {"colour_hue": 48.5}, 3.0),     # or at the green end (leaves)
-    ({"spread": 0.1, "leak": 0.1, "support": 0.99}, {}, 3.0),  # corners
+    ({"spread": 0.1, "leak": 0.1, "support": 0.99, "leak_runs": 4}, {}, 3.0),  # corners
     ({"fill": 0.56, "support": 0.46}, {}, 3.0),        # each check passed, but below min_score
 ])
 def test_judge_rejects(mask_changes, colour_changes, size):
@@ -136,6 +142,9 @@ def test_judge_accepts_what_the_rejections_border_on():
     # an uneven edge without leaks (a touching neighbour) is not a corner
     uneven = CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.1), GOOD_COLOUR, size=3.0)
     assert judge(uneven, config) is not None
+    # nor is an uneven edge leaking in one or two places (a neighbour, a shadow, motion blur)
+    smeared = dataclasses.replace(GOOD_MASK, spread=0.1, leak=0.1, support=0.99, leak_runs=2)
+    assert judge(CandidateMetrics(smeared, GOOD_COLOUR, size=3.0), config) is not None
     # a two-colour ball: the mean of the whole disc is orange, its colour part is the target's
     two_colour = CandidateMetrics(GOOD_MASK, dataclasses.replace(GOOD_COLOUR, mean_hue=22.0), size=3.0)
     assert judge(two_colour, config) is not None
@@ -147,6 +156,12 @@ def test_judge_accepts_what_the_rejections_border_on():
     assert judge(CandidateMetrics(GOOD_MASK, warm, size=3.0), config) is not None
     assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), warm, size=3.0), config) is None
     assert judge(CandidateMetrics(GOOD_MASK, warm, size=1.5), config) is None
+    # and its colour may be duller next to the frame's bright level (a lamp, a lit screen)
+    dull = dataclasses.replace(GOOD_COLOUR, colourfulness=0.8 * config.min_colourfulness)
+    assert judge(CandidateMetrics(GOOD_MASK, dull, size=3.0), config) is not None
+    assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), dull, size=3.0), config) is None
+    assert judge(CandidateMetrics(GOOD_MASK, dataclasses.replace(dull, colourfulness=0.2), size=3.0),
+                 config) is None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None
 

@@ -20,9 +20,10 @@ import pytest
 from balltrack.common.config import ConfigError, load_config
 from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
+from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import (BallDetector, Detection, DetectionResult,
-                                                  without_contained)
+                                                  acceptance_order, without_contained)
 from balltrack.services.detector.geometry import Candidate
 from tests import harness
 from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_lit_from_above, floor,
@@ -258,6 +259,18 @@ def test_a_ball_is_not_suppressed_by_a_piece_of_itself():
     assert len(without_contained([(failed, None), (patch, None)])) == 2
 
 
+def test_a_speck_is_accepted_after_the_balls_it_may_overlap():
+    def measured(x, y, radius, score, size):
+        metrics = CandidateMetrics(MaskMetrics(visible=1.0, support=1.0, leak=0.0, fill=1.0, outside=0.0,
+                                               spread=0.0), NO_COLOUR, size)
+        return Candidate(x, y, radius, score=score), metrics
+
+    ball = measured(200.0, 200.0, 60.0, 0.7, 12.0)
+    speck = measured(242.0, 242.0, 3.0, 0.9, 0.6)  # astride the ball's rim, not inside it
+    larger = measured(100.0, 100.0, 8.0, 0.8, 1.6)
+    assert sorted([speck, ball, larger], key=acceptance_order, reverse=True) == [larger, ball, speck]
+
+
 def test_a_ball_with_a_logo_and_a_highlight(detector):
     image = harness.draw_ball(to_uint8(floor()), 320.4, 240.6, 70.0)
     cv2.putText(image, "Penn 1", (265, 250), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (20, 20, 20), 3)
@@ -440,9 +453,9 @@ def test_pitch_dark_distractors_give_nothing(detector):
 
 
 # Figures with the defaults when they were last changed (recall, false positives per image):
-# tennis_floor_dev 0.748, 0.24; tennis_indoor_dev 0.733, 0.30 (real_tennis_dev: see above).
+# tennis_floor_dev 0.823, 0.14; tennis_indoor_dev 0.849, 0.17 (real_tennis_dev: see above).
 # A floor a little below them: no change may quietly lose what these photos measure.
-DEV_SET_FLOORS = {"tennis_floor_dev": (0.73, 0.26), "tennis_indoor_dev": (0.72, 0.32)}
+DEV_SET_FLOORS = {"tennis_floor_dev": (0.81, 0.16), "tennis_indoor_dev": (0.83, 0.19)}
 
 
 @pytest.mark.parametrize("name", sorted(DEV_SET_FLOORS))

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.mask import (ColourMasker, check_image, ellipse_kernel, frame_gain,
-                                              reference_level)
+from balltrack.services.detector.mask import (ColourMasker, brighten, check_image, ellipse_kernel,
+                                              frame_gain, quarter_sample, reference_level)
 from tests.unit.detector.drawing import coverage, draw_ball, floor, pitch_dark_frame, scene, to_uint8
 
 
@@ -39,6 +39,16 @@ def test_reference_level_is_the_bright_level_capped_by_the_median():
     sky = np.full((120, 64, 3), 10, np.uint8)
     sky[:40] = 200
     assert reference_level(sky) == 30.0
+
+
+def test_reference_level_ignores_isolated_bright_pixels():
+    # salt noise on 3 % of a mid-grey frame (JPEG glints, hot pixels): the level is the grey's
+    frame = np.full((240, 320, 3), 90, np.uint8)
+    frame[::6, ::6] = 255
+    assert reference_level(frame) == 90.0
+    # a bright area keeps its level
+    frame[:, :100] = 120
+    assert reference_level(frame) == 120.0
 
 
 def test_frame_gain_brings_dark_frames_to_the_target():
@@ -103,6 +113,28 @@ def test_dark_frames_are_gained_before_the_colour_test():
     # without the gain the colour of the dark ball is rounding noise
     assert np.count_nonzero(ColourMasker(DetectorConfig(max_gain=1.0)).planes(image).mask[inside]) \
         < 0.5 * np.count_nonzero(inside)
+
+
+def test_brighten_scales_clipping_pixels_only_up_to_white():
+    image = np.zeros((40, 40, 3), np.uint8)
+    image[:, :20] = (10, 40, 30)       # dark: plainly scaled
+    image[:, 20:] = (150, 240, 215)    # pale felt, S ~96: its channels would all clip
+    gained = brighten(image, 3.0, quarter_sample(image))
+    assert tuple(gained[5, 5]) == (30, 120, 90)
+    # the brightest channel at 255, the others in the same ratio: hue and saturation kept
+    assert tuple(gained[5, 30]) == (159, 255, 228)
+    # nothing clips: the plain scaling
+    assert (brighten(image[:, :20], 3.0, quarter_sample(image[:, :20])) == image[:, :20] * 3).all()
+
+
+def test_a_bright_ball_in_a_dark_frame_keeps_its_colour():
+    u, v, radius = 320.5, 240.5, 30.0
+    pale_felt = (150, 240, 215)
+    image = to_uint8(draw_ball(floor() * 0.1, u, v, radius, colour=pale_felt, shade_floor=0.9))
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    assert planes.gain > 2.0  # set by the dark floor
+    inside = coverage(image.shape, u, v, radius - 3) > 0.99
+    assert np.count_nonzero(planes.mask[inside]) > 0.95 * np.count_nonzero(inside)
 
 
 def test_extremely_dark_frames_use_wider_averages():
