@@ -8,6 +8,7 @@ vivid enough (colourfulness); in very dark frames the mean colour of the disc mu
 target's hue too; and its edge is even all round (a box's corners are not).
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -37,6 +38,27 @@ SURE_SIZE = 2.0
 EDGE_STEPS = 25
 
 
+class MeasuredOnFirstRead:
+    """A frozen dataclass's field that may be given a function of no arguments instead of its
+    value: the function is called, once, when the field is first read. (Most candidates fail a
+    cheaper check before ``judge`` reads their spread.)"""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._slot = "_" + name
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            raise AttributeError(self._slot)  # (the dataclass field has no default)
+        value = instance.__dict__[self._slot]
+        if callable(value):
+            value = value()
+            instance.__dict__[self._slot] = value
+        return value
+
+    def __set__(self, instance, value) -> None:
+        instance.__dict__[self._slot] = value
+
+
 @dataclass(frozen=True)
 class MaskMetrics:
     """How a circle sits on the colour mask (all fractions 0-1 but ``spread``)."""
@@ -46,7 +68,8 @@ class MaskMetrics:
     leak: float      # of that rim: mask just outside (the mask goes on past the rim)
     fill: float      # mask fraction of the disc of 0.85 r
     outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
-    spread: float    # spread of the mask edge's distance from the centre, over the radius
+    # spread of the mask edge's distance from the centre, over the radius (see edge_spread)
+    spread: float = MeasuredOnFirstRead()  # type: ignore[assignment]
 
 
 @dataclass(frozen=True)
@@ -159,7 +182,8 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     if known_count < 4:
         return None
     inner_on, outer_on = inner[known] == 255, outer[known] == 255
-    roundness = edge_spread(x, y, radius, mask, samples)
+    # (measured when read: ``mask`` is not changed once candidates are measured on it)
+    roundness = functools.partial(edge_spread, x, y, radius, mask, samples)
 
     outer_radius = 1.45 * radius + 2
     box = box_around(x, y, outer_radius, width, height)
@@ -258,13 +282,13 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
         return None
     # (the mask pixels' mean: a two-colour ball's other half does not count)
-    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
+    sure_by_shape = metrics.clean and metrics.size >= SURE_SIZE and on_mask.spread <= SURE_SPREAD
     if (config.hue_margin > 0 and not sure_by_shape
             and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
         return None
     # Corners: the edge's distance from the centre varies and the blob pokes out of the
     # circle in places (a box face); a ball's edge is even, its neighbours add no spread.
-    if on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK:
+    if on_mask.leak > CORNER_LEAK and on_mask.spread > CORNER_SPREAD:
         return None
     score = (on_mask.fill + on_mask.support - clutter) / 2.0
     score = max(0.0, min(1.0, score))
