@@ -8,6 +8,7 @@ vivid enough (colourfulness); in very dark frames the mean colour of the disc mu
 target's hue too; and its edge is even all round (a box's corners are not).
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -41,6 +42,27 @@ SURE_COLOURFULNESS = 0.75
 EDGE_STEPS = 25
 
 
+class MeasuredOnFirstRead:
+    """A frozen dataclass's field that may be given a function of no arguments instead of its
+    value: the function is called, once, when the field is first read. (Most candidates fail a
+    cheaper check before ``judge`` reads their spread.)"""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._slot = "_" + name
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            raise AttributeError(self._slot)  # (the dataclass field has no default)
+        value = instance.__dict__[self._slot]
+        if callable(value):
+            value = value()
+            instance.__dict__[self._slot] = value
+        return value
+
+    def __set__(self, instance, value) -> None:
+        instance.__dict__[self._slot] = value
+
+
 @dataclass(frozen=True)
 class MaskMetrics:
     """How a circle sits on the colour mask (all fractions 0-1 but ``spread``)."""
@@ -50,7 +72,8 @@ class MaskMetrics:
     leak: float      # of that rim: mask just outside (the mask goes on past the rim)
     fill: float      # mask fraction of the disc of 0.85 r
     outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
-    spread: float    # spread of the mask edge's distance from the centre, over the radius
+    # spread of the mask edge's distance from the centre, over the radius (see edge_spread)
+    spread: float = MeasuredOnFirstRead()  # type: ignore[assignment]
     leak_runs: int = 0  # separate stretches of the rim where the mask goes on past it
 
 
@@ -165,7 +188,8 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     if known_count < 4:
         return None
     inner_on, outer_on = inner[known] == 255, outer[known] == 255
-    roundness = edge_spread(x, y, radius, mask, samples)
+    # (measured when read: ``mask`` is not changed once candidates are measured on it)
+    roundness = functools.partial(edge_spread, x, y, radius, mask, samples)
 
     outer_radius = 1.45 * radius + 2
     box = box_around(x, y, outer_radius, width, height)
@@ -258,7 +282,8 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     """
     on_mask, colour = metrics.mask, metrics.colour
     clutter = on_mask.leak + on_mask.outside
-    sure_by_shape = metrics.clean and on_mask.spread <= SURE_SPREAD and metrics.size >= SURE_SIZE
+    # (size before spread: the spread is measured only when read, see MaskMetrics)
+    sure_by_shape = metrics.clean and metrics.size >= SURE_SIZE and on_mask.spread <= SURE_SPREAD
     colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
     # A circle cut by the frame edge must still show as much rim as a whole ball of
     # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
@@ -280,8 +305,9 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     # spread, and what leaks past its rim does so in one or two places.
     # (Not with a joined highlight: glints of bright ground poke out of it too, and white
     # areas around a candidate already fail its leak and outside checks.)
-    if (not metrics.highlighted and on_mask.spread > CORNER_SPREAD and on_mask.leak > CORNER_LEAK
-            and on_mask.leak_runs >= CORNER_RUNS):
+    # (leak before spread: the spread is measured only when read)
+    if (not metrics.highlighted and on_mask.leak > CORNER_LEAK and on_mask.leak_runs >= CORNER_RUNS
+            and on_mask.spread > CORNER_SPREAD):
         return None
     score = (on_mask.fill + on_mask.support - clutter) / 2.0
     score = max(0.0, min(1.0, score))
