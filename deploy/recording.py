@@ -5,7 +5,8 @@ A :class:`Recording` subscribes to keys on an open session and writes what arriv
 callbacks only take the arrival time and queue the payload, a thread of its own compresses and
 writes, so a recording never slows the subscriber it shares a session with (the demo's). When
 the writer falls behind by more than ``max_queued_bytes`` of payloads, what arrives is dropped
-and counted rather than memory growing without bound.
+and counted rather than memory growing without bound. With ``hold`` the writer leaves each
+message alone for that long after its arrival (the demo: 15 ms, after the pipeline's answer).
 
 :func:`play` publishes a recording's payloads, byte for byte, with the recorded timing (log-time
 differences divided by ``rate``) or as fast as possible (``rate`` 0).
@@ -68,7 +69,7 @@ class Recording:
 
     def __init__(self, session, path, keys: Iterable[str] = DEFAULT_KEYS, namespace: str = "",
                  max_queued_bytes: int = 256 << 20, metadata: dict[str, str] | None = None,
-                 foxglove: bool | None = None):
+                 foxglove: bool | None = None, hold: float = 0.0):
         self.keys = Keys(namespace)
         self._foxglove = foxglove_converter() if foxglove is not False else None
         if foxglove and self._foxglove is None:
@@ -82,6 +83,10 @@ class Recording:
         self._pending: collections.deque = collections.deque()
         self._pending_bytes, self._max_queued_bytes = 0, max_queued_bytes
         self._changed = threading.Condition()
+        # Each message waits `hold` seconds after its arrival before it is compressed and
+        # written (until close): beside a pipeline on a small machine, the work then falls after
+        # the pipeline has answered the frame instead of beside it.
+        self._hold, self._closing = hold, threading.Event()
         self._writer = threading.Thread(target=self._write_queued, name="recording-writer",
                                         daemon=True)
         self._writer.start()
@@ -116,6 +121,8 @@ class Recording:
                     return
                 self._pending_bytes -= len(item[1])
             topic, payload, arrival = item
+            if self._hold > 0:
+                self._closing.wait(arrival / 1e9 + self._hold - time.time())
             key = self.keys.strip(topic)
             channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace,
                                                     self.keys.message_of(topic))
@@ -159,6 +166,7 @@ class Recording:
             except Exception:  # the session may be closed already; the file still gets finished
                 pass
         self._subscribers = []
+        self._closing.set()
         if self._writer.is_alive():
             with self._changed:
                 self._pending.append(None)  # after what is queued: all of it gets written

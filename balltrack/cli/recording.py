@@ -54,6 +54,8 @@ def command_record(args) -> int:
         return _fail(args, "--duration: must be > 0 seconds", 2)
     if args.progress < 0:
         return _fail(args, "--progress: must be >= 0 seconds", 2)
+    if not 0 <= args.hold <= 10:
+        return _fail(args, "--hold: must be 0 to 10 seconds", 2)
     stop = stop_on_signals()
     session = open_or_report(args)
     if session is None:
@@ -63,7 +65,7 @@ def command_record(args) -> int:
     try:
         try:
             recording = Recording(session, args.output, keys, args.namespace,
-                                  foxglove=False if args.no_foxglove else None)
+                                  foxglove=False if args.no_foxglove else None, hold=args.hold)
         except RecordingError as error:
             return _fail(args, str(error), 1)
         except Exception as error:  # e.g. a key expression Zenoh refuses
@@ -83,8 +85,9 @@ def command_record(args) -> int:
                 break
             if args.progress:
                 counts = recording.counts
-                print(f"balltrack record: {counts.written} messages written, {counts.dropped} "
-                      "dropped", file=sys.stderr, flush=True)
+                print(f"balltrack record: {counts.written} messages written, "
+                      f"{counts.received - counts.written} waiting, {counts.dropped} dropped",
+                      file=sys.stderr, flush=True)
         counts = recording.close()
         elapsed = time.monotonic() - started
     finally:
@@ -205,6 +208,11 @@ def register(commands) -> None:
                              "for viewing, when foxglove-sdk is installed)")
     record.add_argument("--progress", type=float, default=0.0, metavar="S",
                         help="print the messages written so far every S seconds on stderr")
+    record.add_argument("--hold", type=float, default=0.0, metavar="S",
+                        help="leave each message S seconds after it arrives before compressing "
+                             "and writing it (0-10, default 0): on a small machine beside the "
+                             "pipeline, 0.015 does the work after the pipeline has answered a "
+                             "frame rather than beside it")
     replay = networked(commands, "play", "publish a recording again", command_play)
     # No namespace given: the recorded keys as they were; --namespace NS moves them under NS.
     replay.set_defaults(namespace=None)

@@ -124,6 +124,25 @@ def test_record_writes_what_was_published_and_info_counts_it(router, session, tm
     assert [message.log_time for message in recorded] == sorted(m.log_time for m in recorded)
 
 
+def test_held_messages_wait_and_are_all_written_at_stop(router, session, tmp_path):
+    path = tmp_path / "held.mcap"
+    recorder = Process([*BALLTRACK, "record", "-o", str(path), "--connect", router.endpoint,
+                        "--hold", "10", "--progress", "0.1", "detected_ball_3d"], tmp_path / "record.log")
+    recorder.wait_for_output("recording", 30)
+    publisher = session.declare_publisher("detected_ball_3d", congestion_control=zenoh.CongestionControl.BLOCK)
+    wait_matched(publisher)
+    for seq in range(1, 11):
+        publisher.put(ball3d(seq))
+    # All ten arrived and none is written yet: each is held 10 s after its arrival...
+    recorder.wait_for_output("0 messages written, 10 waiting", 30)
+    # ...but stopping does not wait out the hold, and loses none of them.
+    assert recorder.stop() == 0, recorder.output()
+    assert "recorded 10 messages" in recorder.output()
+    with RecordingFile(path) as recording:
+        payloads = [message.payload for message in recording.messages() if message.message_encoding == "msgpack"]
+    assert payloads == [ball3d(seq) for seq in range(1, 11)]
+
+
 def known_recording(path, count: int = 12, namespace: str = "") -> list[tuple[str, bytes]]:
     """A file of ``count`` Ball3D and every third an Image, log times 1 s apart. The images are
     160x120 (57 kB, one Zenoh batch): under load a router may drop a message of many fragments
@@ -192,7 +211,8 @@ def test_bad_files_and_arguments_are_one_line_and_exit_2(router, tmp_path):
              ("play", str(garbage), "--rate", "-1", "--connect", router.endpoint),
              ("play", str(garbage), "--rate", "fast"),
              ("record", "--connect", router.endpoint),  # no -o
-             ("record", "-o", str(tmp_path / "x.mcap"), "--duration", "0")]
+             ("record", "-o", str(tmp_path / "x.mcap"), "--duration", "0"),
+             ("record", "-o", str(tmp_path / "x.mcap"), "--hold", "-0.1")]
     for arguments in cases:
         result = balltrack(*arguments)
         assert result.returncode == 2, (arguments, result.stderr)
