@@ -7,7 +7,9 @@ module of this package:
    mask (HSV ranges and a chroma floor) and its morphological clean-up; extremely dark frames
    are classified on wider averages.
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
-   a clean isolated ball, Hough circles inside the blob's box.
+   a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
+   of the long round pieces of its outline between concave points (a ball partly hidden
+   behind another).
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
@@ -45,6 +47,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from balltrack.services.detector.arcs import arc_proposals
 from balltrack.services.detector.checks import (NO_COLOUR, CandidateMetrics, colour_stats, judge,
                                                 measure_mask)
 from balltrack.services.detector.config import DetectorConfig
@@ -54,8 +57,8 @@ from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
-from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_proposals,
-                                                   fill_holes, frame_search, hough_proposals,
+from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
+                                                   blob_proposals, fill_holes, frame_search, hough_proposals,
                                                    inscribed_discs, leftover_blobs)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
@@ -150,6 +153,7 @@ class BallDetector:
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
             in_blob = self._measure_proposals(proposals, search, shape_mask)
+            in_blob.extend(self._arc_candidates(contour, search, shape_mask))
             measured.extend(in_blob)
             measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob))
         return self._accept(measured, search)
@@ -162,6 +166,17 @@ class BallDetector:
         if proposals is None:
             return None
         return self._measure_proposals(proposals, search, mask)
+
+    def _arc_candidates(self, contour: np.ndarray, search: FrameSearch,
+                        mask: np.ndarray) -> list[Measured]:
+        """The circles of the blob's long even outline arcs (see arcs.py), refined and
+        measured on ``mask``: those as large as a cluster member and evenly edged all round
+        (CLUSTER_MIN_SIZE, CLUSTER_SPREAD): a piece of outline alone proves less than a whole
+        blob, and a lobe of ragged clutter is round along one arc only."""
+        blob, left, top = blob_image(contour, mask)
+        arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
+        return [(candidate, metrics) for candidate, metrics in self._measure_proposals(arcs, search, mask)
+                if metrics.size >= CLUSTER_MIN_SIZE and metrics.mask.spread <= CLUSTER_SPREAD]
 
     def _measure_proposals(self, proposals: list[Candidate], search: FrameSearch,
                            mask: np.ndarray) -> list[Measured]:
