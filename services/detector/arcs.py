@@ -32,6 +32,44 @@ ARC_MIN_SPAN = math.radians(120)
 ARC_ROUNDS = (0.25, 0.15, ARC_TOLERANCE)
 
 
+def deepest_cut(points: np.ndarray, depth: float) -> int | None:
+    """Index of the deepest concave point of an outline (closed, or open and closed by the
+    chord between its ends) at least ``depth`` inside its convex hull; None when there is none."""
+    contour = np.rint(points).astype(np.int32).reshape(-1, 1, 2)
+    hull = cv2.convexHull(contour, returnPoints=False)
+    if hull is None or len(hull) < 4:
+        return None
+    # (OpenCV wants the hull's indices in order round the outline)
+    hull = np.sort(hull.reshape(-1))[:, None].astype(np.int32)
+    try:
+        defects = cv2.convexityDefects(contour, hull)
+    except cv2.error:
+        return None
+    if defects is None:
+        return None
+    defects = defects.reshape(-1, 4)
+    # (an open piece's ends are cuts already)
+    defects = defects[(defects[:, 2] > 0) & (defects[:, 2] < len(points) - 1)]
+    if not len(defects):
+        return None
+    deepest = int(np.argmax(defects[:, 3]))
+    if defects[deepest, 3] / 256.0 < depth:
+        return None
+    return int(defects[deepest, 2])
+
+
+def cut_piece(piece: np.ndarray, depth: float) -> list[np.ndarray]:
+    """An open piece of outline cut at its concave points, deepest first: the convex hull
+    reports one concave point per hull edge, so balls in a row along one edge need cuts
+    within cuts."""
+    if len(piece) < 2 * ARC_MIN_POINTS:
+        return [piece]
+    cut = deepest_cut(piece, depth)
+    if cut is None:
+        return [piece]
+    return cut_piece(piece[:cut + 1], depth) + cut_piece(piece[cut:], depth)
+
+
 def outline_pieces(blob: np.ndarray) -> list[np.ndarray]:
     """The outline of the largest blob of a 0/255 image cut at its concave points: a list of
     (n x 2) float arrays of pixel positions in order; [] when the outline has no concave point
@@ -40,36 +78,16 @@ def outline_pieces(blob: np.ndarray) -> list[np.ndarray]:
     if not contours:
         return []
     contour = max(contours, key=cv2.contourArea)
-    count = len(contour)
-    if count < 2 * ARC_MIN_POINTS:
-        return []
-    hull = cv2.convexHull(contour, returnPoints=False)
-    if hull is None or len(hull) < 4:
-        return []
-    # (OpenCV wants the hull's indices in order round the outline)
-    hull = np.sort(hull.reshape(-1))[:, None].astype(np.int32)
-    try:
-        defects = cv2.convexityDefects(contour, hull)
-    except cv2.error:
-        return []
-    if defects is None:
-        return []
-    area = cv2.contourArea(contour)
-    depth = max(ARC_CUT_DEPTH, ARC_CUT_SHARE * math.sqrt(area / math.pi))
-    cuts = sorted(int(far) for _, _, far, fixed_depth in defects.reshape(-1, 4) if fixed_depth / 256.0 >= depth)
-    if not cuts:
+    if len(contour) < 2 * ARC_MIN_POINTS:
         return []
     points = contour.reshape(-1, 2).astype(np.float64)
-    pieces = []
-    for index, start in enumerate(cuts):
-        stop = cuts[(index + 1) % len(cuts)]
-        if stop > start:
-            piece = points[start:stop + 1]
-        else:  # (the piece runs through the contour's first point)
-            piece = np.concatenate([points[start:], points[:stop + 1]])
-        if len(piece) >= ARC_MIN_POINTS:
-            pieces.append(piece)
-    return pieces
+    depth = max(ARC_CUT_DEPTH, ARC_CUT_SHARE * math.sqrt(cv2.contourArea(contour) / math.pi))
+    first = deepest_cut(points, depth)
+    if first is None:
+        return []
+    # (the closed outline opened at its deepest concave point, then cut further)
+    opened = np.concatenate([points[first:], points[:first + 1]])
+    return [piece for piece in cut_piece(opened, depth) if len(piece) >= ARC_MIN_POINTS]
 
 
 def arc_circle(piece: np.ndarray) -> tuple[float, float, float] | None:

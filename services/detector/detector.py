@@ -153,9 +153,11 @@ class BallDetector:
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
             in_blob = self._measure_proposals(proposals, search, shape_mask)
-            in_blob.extend(self._arc_candidates(contour, search, shape_mask))
+            blob, left, top = blob_image(contour, shape_mask)
+            arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
+            in_blob.extend(self._arc_candidates(arcs, search, shape_mask))
             measured.extend(in_blob)
-            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob))
+            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob, arcs))
         return self._accept(measured, search)
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
@@ -167,14 +169,12 @@ class BallDetector:
             return None
         return self._measure_proposals(proposals, search, mask)
 
-    def _arc_candidates(self, contour: np.ndarray, search: FrameSearch,
+    def _arc_candidates(self, arcs: list[Candidate], search: FrameSearch,
                         mask: np.ndarray) -> list[Measured]:
-        """The circles of the blob's long even outline arcs (see arcs.py), refined and
-        measured on ``mask``: those as large as a cluster member and evenly edged all round
+        """The circles of a blob's long even outline arcs (see arcs.py), refined and measured
+        on ``mask``: those as large as a cluster member and evenly edged all round
         (CLUSTER_MIN_SIZE, CLUSTER_SPREAD): a piece of outline alone proves less than a whole
         blob, and a lobe of ragged clutter is round along one arc only."""
-        blob, left, top = blob_image(contour, mask)
-        arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
         return [(candidate, metrics) for candidate, metrics in self._measure_proposals(arcs, search, mask)
                 if metrics.size >= CLUSTER_MIN_SIZE and metrics.mask.spread <= CLUSTER_SPREAD]
 
@@ -210,7 +210,7 @@ class BallDetector:
         return results
 
     def _cluster_candidates(self, contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
-                            proposed: list[Measured]) -> list[Measured]:
+                            proposed: list[Measured], arcs: list[Candidate]) -> list[Measured]:
         """The balls of a cluster of touching balls, each measured as if the others were
         already found (its rim towards them is neither edge nor leak); [] unless the blob is
         such a cluster.
@@ -218,7 +218,8 @@ class BallDetector:
         Members are circles nearly all colour, evenly edged and large enough (CLUSTER_*), not
         overlapping: the blob's measured proposals, most rim support first, then the
         inscribed discs of what they leave of it (proposals.inscribed_discs); together they
-        must cover most of the blob (proposals.CLUSTER_COVER).
+        must cover most of the blob (proposals.CLUSTER_COVER). ``arcs``: the circles of the
+        blob's outline arcs (arcs.py), which seed a third reading.
         """
         smallest = CLUSTER_MIN_SIZE * search.small_radius
         if cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
@@ -247,10 +248,18 @@ class BallDetector:
             if member_like(candidate, metrics) and all(circle_overlap(candidate, other) < 0.3
                                                        for other in from_proposals):
                 from_proposals.append(candidate)
-        # Two readings of the blob: the proposals' circles completed by inscribed discs (Hough
-        # splits a heap whose gaps the mask's closing filled), or inscribed discs alone; the
-        # one that explains more of it.
-        readings = [completed(from_proposals), completed([])]
+        # (unrefined: the mask's boundary pixels near an arc's circle include its neighbours')
+        from_arcs: list[Candidate] = []
+        for candidate in arcs:
+            on_mask = measure_mask(candidate, mask)
+            if (on_mask is not None and member_like(candidate, CandidateMetrics(on_mask, NO_COLOUR, 0.0))
+                    and all(circle_overlap(candidate, other) < 0.3 for other in from_arcs)):
+                from_arcs.append(candidate)
+        # Three readings of the blob: the proposals' circles completed by inscribed discs (Hough
+        # splits a heap whose gaps the mask's closing filled), the outline arcs' circles
+        # completed so (a ball partly behind another), or inscribed discs alone; the one that
+        # explains most of it.
+        readings = [completed(from_proposals), completed([]), completed(from_arcs)]
         covers = [blob_cover(contour, mask, reading) if len(reading) >= 2 else 0.0 for reading in readings]
         best = int(np.argmax(covers))
         if covers[best] < CLUSTER_COVER:

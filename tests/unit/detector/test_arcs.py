@@ -56,3 +56,15 @@ def test_straight_and_ragged_outlines_propose_no_circle():
     star = np.zeros(SHAPE, np.uint8)
     cv2.fillPoly(star, [np.rint(points).astype(np.int32)], 255)
     assert arc_proposals(star, 0, 0, 5.0, 120.0) == []
+
+
+def test_balls_in_a_row_are_cut_apart_on_both_sides():
+    # the convex hull's long edges each span two concave points: cuts within cuts
+    centres = [(80.0, 120.0), (116.0, 120.0), (152.0, 120.0), (188.0, 120.0)]
+    mask = np.zeros(SHAPE, np.uint8)
+    for x, y in centres:
+        mask |= disc(SHAPE, x, y, 20.0)
+    circles = arc_proposals(mask, 0, 0, 5.0, 120.0)
+    for x, y in centres:
+        found = nearest(circles, x, y)
+        assert math.hypot(found.x - x, found.y - y) < 2.0 and abs(found.radius - 20.0) < 1.5
