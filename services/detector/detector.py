@@ -7,7 +7,9 @@ module of this package:
    mask (HSV ranges and a chroma floor) and its morphological clean-up; extremely dark frames
    are classified on wider averages.
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
-   a clean isolated ball, Hough circles inside the blob's box.
+   a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
+   of the long round pieces of its outline between concave points (a ball partly hidden
+   behind another).
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
@@ -45,7 +47,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import (CandidateMetrics, colour_stats, judge,
+from balltrack.services.detector.arcs import arc_proposals
+from balltrack.services.detector.checks import (NO_COLOUR, CandidateMetrics, colour_stats, judge,
                                                 measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
@@ -54,8 +57,8 @@ from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
-from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_proposals,
-                                                   fill_holes, frame_search, hough_proposals,
+from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
+                                                   blob_proposals, fill_holes, frame_search, hough_proposals,
                                                    inscribed_discs, leftover_blobs)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
@@ -150,8 +153,11 @@ class BallDetector:
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
             in_blob = self._measure_proposals(proposals, search, shape_mask)
+            blob, left, top = blob_image(contour, shape_mask)
+            arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
+            in_blob.extend(self._arc_candidates(arcs, search, shape_mask))
             measured.extend(in_blob)
-            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob))
+            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob, arcs))
         return self._accept(measured, search)
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
@@ -162,6 +168,15 @@ class BallDetector:
         if proposals is None:
             return None
         return self._measure_proposals(proposals, search, mask)
+
+    def _arc_candidates(self, arcs: list[Candidate], search: FrameSearch,
+                        mask: np.ndarray) -> list[Measured]:
+        """The circles of a blob's long even outline arcs (see arcs.py), refined and measured
+        on ``mask``: those as large as a cluster member and evenly edged all round
+        (CLUSTER_MIN_SIZE, CLUSTER_SPREAD): a piece of outline alone proves less than a whole
+        blob, and a lobe of ragged clutter is round along one arc only."""
+        return [(candidate, metrics) for candidate, metrics in self._measure_proposals(arcs, search, mask)
+                if metrics.size >= CLUSTER_MIN_SIZE and metrics.mask.spread <= CLUSTER_SPREAD]
 
     def _measure_proposals(self, proposals: list[Candidate], search: FrameSearch,
                            mask: np.ndarray) -> list[Measured]:
@@ -195,7 +210,7 @@ class BallDetector:
         return results
 
     def _cluster_candidates(self, contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
-                            proposed: list[Measured]) -> list[Measured]:
+                            proposed: list[Measured], arcs: list[Candidate]) -> list[Measured]:
         """The balls of a cluster of touching balls, each measured as if the others were
         already found (its rim towards them is neither edge nor leak); [] unless the blob is
         such a cluster.
@@ -203,7 +218,8 @@ class BallDetector:
         Members are circles nearly all colour, evenly edged and large enough (CLUSTER_*), not
         overlapping: the blob's measured proposals, most rim support first, then the
         inscribed discs of what they leave of it (proposals.inscribed_discs); together they
-        must cover most of the blob (proposals.CLUSTER_COVER).
+        must cover most of the blob (proposals.CLUSTER_COVER). ``arcs``: the circles of the
+        blob's outline arcs (arcs.py), which seed a third reading.
         """
         smallest = CLUSTER_MIN_SIZE * search.small_radius
         if cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
@@ -234,11 +250,20 @@ class BallDetector:
             if member_like(candidate, metrics) and all(circle_overlap(candidate, other) < 0.3
                                                        for other in from_proposals):
                 from_proposals.append(candidate)
-        # Two readings of the blob: the proposals' circles completed by inscribed discs (Hough
-        # splits a heap whose gaps the mask's closing filled), or inscribed discs alone; the
-        # one that explains more of it.
-        # (with no proposal a member, both readings are the same: it is made once)
-        readings = [completed(from_proposals)] + ([completed([])] if from_proposals else [])
+        # (unrefined: the mask's boundary pixels near an arc's circle include its neighbours')
+        from_arcs: list[Candidate] = []
+        for candidate in arcs:
+            on_mask = measure_mask(candidate, mask)
+            if (on_mask is not None and member_like(candidate, CandidateMetrics(on_mask, NO_COLOUR, 0.0))
+                    and all(circle_overlap(candidate, other) < 0.3 for other in from_arcs)):
+                from_arcs.append(candidate)
+        # Three readings of the blob: the proposals' circles completed by inscribed discs (Hough
+        # splits a heap whose gaps the mask's closing filled), the outline arcs' circles
+        # completed so (a ball partly behind another), or inscribed discs alone; the one that
+        # explains most of it.
+        # (with no proposal or no arc a member, a reading is the discs alone: made once)
+        readings = ([completed(from_proposals)] + ([completed([])] if from_proposals else [])
+                    + ([completed(from_arcs)] if from_arcs else []))
         covers = [blob_cover(contour, mask, reading) if len(reading) >= 2 else 0.0 for reading in readings]
         best = int(np.argmax(covers))
         if covers[best] < CLUSTER_COVER:

@@ -1,0 +1,134 @@
+"""Outline arcs: circles proposed by the round stretches of a blob's outline (part of step 5,
+see ``detector.py``).
+
+A ball partly hidden behind another ball, or touching one of its colour, merges with it into
+one blob, yet the part of its outline in view is still an arc of a circle. Where two balls
+meet, the blob's outline turns inwards (a concave point, a defect of its convex hull); between
+those points it runs along one ball's rim. So the outline is cut at its concave points and a
+circle is fitted to each piece: a piece that is a long, even arc of a circle proposes that
+circle, however little of the ball's disc the mask shows apart from its neighbours.
+"""
+
+import math
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.fit import fit_circle
+from balltrack.services.detector.geometry import Candidate
+
+# A concave point cuts the outline when it lies at least ARC_CUT_DEPTH px (at processing size),
+# or ARC_CUT_SHARE of the blob's equivalent radius, inside the blob's convex hull: a ragged
+# mask edge dents it by a pixel or so.
+ARC_CUT_DEPTH = 2.0
+ARC_CUT_SHARE = 0.06
+# A piece proposes its circle when at least ARC_MIN_POINTS outline pixels lie on it, within
+# ARC_TOLERANCE of the radius (a ball's mask edge is even; a lobe of clutter is not), spanning
+# at least ARC_MIN_SPAN radians round its centre (a short arc fits any circle).
+ARC_MIN_POINTS = 12
+ARC_TOLERANCE = 0.08
+ARC_MIN_SPAN = math.radians(120)
+# Rounds of fitting, each keeping the points within this share of the radius of the last circle.
+ARC_ROUNDS = (0.25, 0.15, ARC_TOLERANCE)
+
+
+def deepest_cut(points: np.ndarray, depth: float) -> int | None:
+    """Index of the deepest concave point of an outline (closed, or open and closed by the
+    chord between its ends) at least ``depth`` inside its convex hull; None when there is none."""
+    contour = np.rint(points).astype(np.int32).reshape(-1, 1, 2)
+    hull = cv2.convexHull(contour, returnPoints=False)
+    if hull is None or len(hull) < 4:
+        return None
+    # (OpenCV wants the hull's indices in order round the outline)
+    hull = np.sort(hull.reshape(-1))[:, None].astype(np.int32)
+    try:
+        defects = cv2.convexityDefects(contour, hull)
+    except cv2.error:
+        return None
+    if defects is None:
+        return None
+    defects = defects.reshape(-1, 4)
+    # (an open piece's ends are cuts already)
+    defects = defects[(defects[:, 2] > 0) & (defects[:, 2] < len(points) - 1)]
+    if not len(defects):
+        return None
+    deepest = int(np.argmax(defects[:, 3]))
+    if defects[deepest, 3] / 256.0 < depth:
+        return None
+    return int(defects[deepest, 2])
+
+
+def cut_piece(piece: np.ndarray, depth: float) -> list[np.ndarray]:
+    """An open piece of outline cut at its concave points, deepest first: the convex hull
+    reports one concave point per hull edge, so balls in a row along one edge need cuts
+    within cuts."""
+    if len(piece) < 2 * ARC_MIN_POINTS:
+        return [piece]
+    cut = deepest_cut(piece, depth)
+    if cut is None:
+        return [piece]
+    return cut_piece(piece[:cut + 1], depth) + cut_piece(piece[cut:], depth)
+
+
+def outline_pieces(blob: np.ndarray) -> list[np.ndarray]:
+    """The outline of the largest blob of a 0/255 image cut at its concave points: a list of
+    (n x 2) float arrays of pixel positions in order; [] when the outline has no concave point
+    (a convex blob: its enclosing circle is proposed already)."""
+    contours, _ = cv2.findContours(blob, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return []
+    contour = max(contours, key=cv2.contourArea)
+    if len(contour) < 2 * ARC_MIN_POINTS:
+        return []
+    points = contour.reshape(-1, 2).astype(np.float64)
+    depth = max(ARC_CUT_DEPTH, ARC_CUT_SHARE * math.sqrt(cv2.contourArea(contour) / math.pi))
+    first = deepest_cut(points, depth)
+    if first is None:
+        return []
+    # (the closed outline opened at its deepest concave point, then cut further)
+    opened = np.concatenate([points[first:], points[:first + 1]])
+    return [piece for piece in cut_piece(opened, depth) if len(piece) >= ARC_MIN_POINTS]
+
+
+def arc_circle(piece: np.ndarray) -> tuple[float, float, float] | None:
+    """The circle a piece of outline is a long even arc of, or None."""
+    mean_x, mean_y = float(piece[:, 0].mean()), float(piece[:, 1].mean())
+    dx, dy = piece[:, 0] - mean_x, piece[:, 1] - mean_y
+    fitted = fit_circle(dx, dy)
+    if fitted is None:
+        return None
+    x, y, radius = fitted
+    near = np.ones(len(piece), bool)
+    for tolerance in ARC_ROUNDS:
+        near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, tolerance * radius)
+        if np.count_nonzero(near) < ARC_MIN_POINTS:
+            return None
+        fitted = fit_circle(dx[near], dy[near])
+        if fitted is None:
+            return None
+        x, y, radius = fitted
+    near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, ARC_TOLERANCE * radius)
+    if np.count_nonzero(near) < max(ARC_MIN_POINTS, 0.5 * len(piece)):
+        return None
+    angles = np.sort(np.arctan2(dy[near] - y, dx[near] - x))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * math.pi]))
+    if 2 * math.pi - float(gaps.max()) < ARC_MIN_SPAN:
+        return None
+    return x + mean_x, y + mean_y, radius
+
+
+def arc_proposals(blob: np.ndarray, left: int, top: int, min_radius: float,
+                  max_radius: float) -> list[Candidate]:
+    """Circles of the long even arcs of a blob's outline (``blob``: its 0/255 image, whose
+    origin lies at (left, top) in the frame), radii within the limits, in frame coordinates;
+    the arc's pixels are the mask's outermost, half a pixel inside its edge."""
+    circles = []
+    for piece in outline_pieces(blob):
+        found = arc_circle(piece)
+        if found is None:
+            continue
+        x, y, radius = found
+        radius += 0.5
+        if min_radius <= radius <= max_radius:
+            circles.append(Candidate(x + left, y + top, radius))
+    return circles

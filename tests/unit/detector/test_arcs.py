@@ -1,0 +1,70 @@
+"""Outline arcs (services/detector/arcs.py): circles of the round pieces of drawn blobs."""
+
+import math
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.arcs import arc_proposals, outline_pieces
+from balltrack.services.detector.geometry import disc
+
+SHAPE = (240, 320)
+
+
+def nearest(circles, x, y):
+    return min(circles, key=lambda circle: math.hypot(circle.x - x, circle.y - y))
+
+
+def test_a_ball_partly_behind_another_is_proposed_by_its_arc():
+    # the back ball shows about half its disc beside the front one
+    back, front = (120.0, 110.0, 26.0), (150.0, 130.0, 24.0)
+    mask = disc(SHAPE, *back) | disc(SHAPE, *front)
+    circles = arc_proposals(mask, 0, 0, 5.0, 120.0)
+    for x, y, radius in (back, front):
+        found = nearest(circles, x, y)
+        assert math.hypot(found.x - x, found.y - y) < 2.0
+        assert abs(found.radius - radius) < 1.5
+
+
+def test_circles_are_given_in_frame_coordinates_and_within_the_radius_limits():
+    mask = disc(SHAPE, 100.0, 100.0, 20.0) | disc(SHAPE, 135.0, 100.0, 20.0)
+    [first, second] = sorted(arc_proposals(mask, 10, 30, 5.0, 120.0), key=lambda circle: circle.x)
+    assert math.hypot(first.x - 110.0, first.y - 130.0) < 2.0
+    assert math.hypot(second.x - 145.0, second.y - 130.0) < 2.0
+    assert arc_proposals(mask, 0, 0, 25.0, 120.0) == []  # balls smaller than the limit
+    assert arc_proposals(mask, 0, 0, 5.0, 15.0) == []    # or larger
+
+
+def test_a_convex_blob_has_no_pieces():
+    assert outline_pieces(disc(SHAPE, 160.0, 120.0, 30.0)) == []
+    box = np.zeros(SHAPE, np.uint8)
+    box[60:160, 100:220] = 255
+    assert outline_pieces(box) == []
+
+
+def test_straight_and_ragged_outlines_propose_no_circle():
+    # an L of two bars: concave at its inner corner, but its pieces are straight
+    shape_l = np.zeros(SHAPE, np.uint8)
+    shape_l[40:200, 60:100] = 255
+    shape_l[160:200, 60:260] = 255
+    assert outline_pieces(shape_l)
+    assert arc_proposals(shape_l, 0, 0, 5.0, 120.0) == []
+    # a star: its points are lobes too sharp and short to be arcs of a circle
+    angles = np.linspace(0, 2 * math.pi, 16, endpoint=False)
+    lengths = np.where(np.arange(16) % 2 == 0, 80.0, 30.0)
+    points = np.stack([160 + lengths * np.cos(angles), 120 + lengths * np.sin(angles)], axis=1)
+    star = np.zeros(SHAPE, np.uint8)
+    cv2.fillPoly(star, [np.rint(points).astype(np.int32)], 255)
+    assert arc_proposals(star, 0, 0, 5.0, 120.0) == []
+
+
+def test_balls_in_a_row_are_cut_apart_on_both_sides():
+    # the convex hull's long edges each span two concave points: cuts within cuts
+    centres = [(80.0, 120.0), (116.0, 120.0), (152.0, 120.0), (188.0, 120.0)]
+    mask = np.zeros(SHAPE, np.uint8)
+    for x, y in centres:
+        mask |= disc(SHAPE, x, y, 20.0)
+    circles = arc_proposals(mask, 0, 0, 5.0, 120.0)
+    for x, y in centres:
+        found = nearest(circles, x, y)
+        assert math.hypot(found.x - x, found.y - y) < 2.0 and abs(found.radius - 20.0) < 1.5
