@@ -25,6 +25,9 @@ HOUGH_CIRCLES_SCANNED = 40
 # A hole of a blob is filled when it is at most this share of the blob's outline area: a
 # ball's logo or highlight is a fraction of it, the opening of a ring is most of it.
 HOLE_SHARE = 0.5
+# A mask piece left next to an accepted ball's cleared disc counts as touching it within this
+# many pixels of the disc's edge (see leftover_blobs).
+LEFTOVER_TOUCH = 2
 _BOUNDARY_KERNEL = np.ones((3, 3), np.uint8)
 # Touching balls of one colour are one blob with no edge between them. Their proposals: the
 # blob's largest inscribed discs, one after another (at most CLUSTER_BALLS, none under
@@ -254,8 +257,12 @@ def blob_cover(contour: np.ndarray, mask: np.ndarray, discs: list[Candidate]) ->
 
 
 def leftover_blobs(balls: list[Candidate], explained: np.ndarray) -> list[np.ndarray]:
-    """Contours of the mask pieces (value 255 of ``explained``) left within reach of freshly
-    accepted balls, whose discs ``explained`` has marked as neither colour nor not."""
+    """Contours of the mask pieces (value 255 of ``explained``) that touch the disc of a freshly
+    accepted ball, which ``explained`` has marked as neither colour nor not.
+
+    Only a piece touching the disc was part of the ball's blob and so is new: a piece apart
+    from it was a blob of its own from the start and has been proposed already (this search
+    re-proposing it let a speck far from the ball through on the cleared mask)."""
     height, width = explained.shape
     contours_found: list[np.ndarray] = []
     for ball in balls:
@@ -266,6 +273,13 @@ def leftover_blobs(balls: list[Candidate], explained: np.ndarray) -> list[np.nda
             continue
         leftover = cv2.inRange(explained[y0:y1, x0:x1], 255, 255)
         contours, _ = cv2.findContours(leftover, cv2.RETR_EXTERNAL,
-                                       cv2.CHAIN_APPROX_SIMPLE, offset=(x0, y0))
-        contours_found.extend(contours)
+                                       cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
+        # (the disc was drawn ceil(1.08 r + 1) px wide; its neighbours' edge pixels lie a
+        # pixel beyond, and the piece's outline a further pixel for the mask's raggedness)
+        touching = math.ceil(1.08 * ball.radius + 1) + LEFTOVER_TOUCH
+        for contour in contours:
+            points = contour.reshape(-1, 2).astype(np.float32)
+            nearest = float(np.min(np.hypot(points[:, 0] - ball.x, points[:, 1] - ball.y)))
+            if nearest <= touching:
+                contours_found.append(contour)
     return contours_found

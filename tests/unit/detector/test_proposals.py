@@ -161,6 +161,23 @@ def test_leftover_blobs_are_the_pieces_near_an_accepted_ball():
     assert leftover_blobs([], explained) == []
 
 
+def test_leftover_blobs_leave_out_pieces_apart_from_the_ball():
+    # a speck within reach of the accepted ball but never joined to it was a blob of its own
+    # from the start (already proposed); only the neighbour that touches the disc is new
+    ball = Candidate(120.0, 120.0, 25.0)
+    explained = disc(SHAPE, 120.0, 120.0, 25.0) | disc(SHAPE, 160.0, 120.0, 15.0)
+    explained |= disc(SHAPE, 120.0, 190.0, 5.0)  # 70 px below: inside the reach, apart
+    cv2.circle(explained, (120, 120), int(math.ceil(25.0 * 1.08 + 1)), EXPLAINED, -1)
+    pieces = leftover_blobs([ball], explained)
+    assert len(pieces) == 1
+    left, _, width, _ = cv2.boundingRect(pieces[0])
+    assert left + width == 176  # the neighbour's outer edge
+    # a neighbour whose mask stops a pixel short of the cleared disc (a ragged edge) still counts
+    gap = disc(SHAPE, 120.0, 120.0, 25.0) | (disc(SHAPE, 165.0, 120.0, 15.0) & ~disc(SHAPE, 120.0, 120.0, 29.0))
+    cv2.circle(gap, (120, 120), int(math.ceil(25.0 * 1.08 + 1)), EXPLAINED, -1)
+    assert len(leftover_blobs([ball], gap)) == 1
+
+
 def test_a_cluster_of_touching_balls_splits_into_inscribed_discs_that_cover_it():
     centres = [(100.0, 120.0), (139.0, 124.0), (120.0, 158.0)]
     mask = np.zeros(SHAPE, np.uint8)
