@@ -20,7 +20,6 @@ import argparse
 import collections
 import logging
 import os
-import signal
 import sys
 import threading
 import time
@@ -37,6 +36,7 @@ from balltrack.common.config import (ConfigError, config_to_dict, describe_confi
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
+from balltrack.common.shutdown import stop_on_signals
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
@@ -327,9 +327,7 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
 
     # The session opens in a thread so that SIGINT/SIGTERM while the router is still
     # unreachable ends the service at once with status 0, as when it is running.
-    stop = threading.Event()
-    for signal_number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signal_number, lambda *_: stop.set())
+    stop = stop_on_signals()
     opened: dict[str, Any] = {}
 
     def open_session():

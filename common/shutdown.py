@@ -4,9 +4,19 @@ import signal
 import threading
 
 
+def set_from_signal(event: threading.Event) -> None:
+    """Set ``event`` from a signal handler.
+
+    A handler runs in the main thread between two bytecodes, possibly while that thread holds
+    the event's own lock inside ``event.wait()``; ``event.set()`` there would wait for that
+    lock for ever (seen: a simulator that ignored SIGTERM until it was killed). A short thread
+    sets it instead, once the main thread is back in its wait."""
+    threading.Thread(target=event.set, name="signal-stop", daemon=True).start()
+
+
 def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
     """Return an event that SIGINT and SIGTERM set (call from the main thread)."""
     stop = stop or threading.Event()
     for signal_number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signal_number, lambda *_: stop.set())
+        signal.signal(signal_number, lambda *_: set_from_signal(stop))
     return stop

@@ -45,6 +45,7 @@ from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
 from balltrack.common.session import ArgumentParser, open_session, secure_client_path
+from balltrack.common.shutdown import set_from_signal
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.deploy.recording import DEFAULT_KEYS
@@ -332,7 +333,7 @@ def run(args) -> int:
     def on_signal(*_):
         if stop.is_set():  # a second Ctrl-C: stop waiting for anything
             raise KeyboardInterrupt
-        stop.set()
+        set_from_signal(stop)
 
     for signal_number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signal_number, on_signal)

@@ -42,6 +42,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from balltrack.common.shutdown import set_from_signal
+
 LOG = logging.getLogger("supervisor")
 
 # Child states, as written to status.json.
@@ -417,5 +419,5 @@ def supervise(run_dir: Path, settings: SupervisorSettings | None = None, log_fil
     specs, info = load_launch(run_dir)
     supervisor = Supervisor(run_dir, specs, settings, info)
     for signal_number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signal_number, lambda *_: supervisor.stop.set())
+        signal.signal(signal_number, lambda *_: set_from_signal(supervisor.stop))
     return supervisor.run()

@@ -68,9 +68,11 @@ def main() -> int:
         if args.count and received[0] >= args.count:
             stop.set()
 
-    # Ctrl-C (SIGINT) or SIGTERM: leave the loop, close the session, exit 0.
+    # Ctrl-C (SIGINT) or SIGTERM: leave the loop, close the session, exit 0. The event is set
+    # from a short thread: the handler interrupts the main thread, which may be holding the
+    # event's own lock inside stop.wait(), where stop.set() would wait for ever.
     for signal_number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signal_number, lambda *_: stop.set())
+        signal.signal(signal_number, lambda *_: threading.Thread(target=stop.set, daemon=True).start())
     try:
         session = zenoh.open(config)
     except Exception as error:  # no router at that endpoint

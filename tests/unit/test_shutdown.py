@@ -1,0 +1,25 @@
+"""SIGINT/SIGTERM set the one stop event without ever blocking the thread they interrupt."""
+
+import signal
+import threading
+
+from balltrack.common.shutdown import stop_on_signals
+
+
+def test_a_signal_landing_inside_stop_wait_does_not_deadlock():
+    saved = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        stop = stop_on_signals(threading.Event())
+        handler = signal.getsignal(signal.SIGTERM)
+        # A handler runs in the main thread, which may be inside stop.wait() holding the
+        # event's own lock (CPython's Event._cond) at that moment: hold it, and run the handler.
+        with stop._cond:
+            caller = threading.Thread(target=handler, args=(signal.SIGTERM, None))
+            caller.start()
+            caller.join(5)
+            assert not caller.is_alive(), "the handler blocked on the event's lock"
+            assert not stop.is_set()
+        assert stop.wait(5)  # set as soon as the lock is free
+    finally:
+        for number, previous in saved.items():
+            signal.signal(number, previous)
