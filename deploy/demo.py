@@ -30,7 +30,6 @@ import math
 import os
 import queue
 import signal
-import subprocess
 import sys
 import threading
 import time
@@ -47,6 +46,7 @@ from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING
 from balltrack.common.session import ArgumentParser, open_session, secure_client_path
 from balltrack.common.shutdown import set_from_signal
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
+from balltrack.deploy.command import Command
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.deploy.recording import DEFAULT_KEYS
 
@@ -276,43 +276,34 @@ class Observer:
 RECORD_HOLD = 0.015
 
 
-def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -> subprocess.Popen | None:
+def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -> Command | None:
     """``balltrack record`` into run.mcap, in a process of its own, once it has subscribed.
 
     Compressing 30 frames a second holds the interpreter lock for milliseconds at a time (a
     thread meaning to wake after 1 ms woke p99 3 ms, at worst 13 ms late beside the recording
     writer): in this process that would delay the arrivals the demo times."""
-    command = [sys.executable, "-m", "balltrack", "record", "-o", str(run_dir / "run.mcap"),
-               "--connect", endpoint, "--hold", str(RECORD_HOLD), *RECORDED_KEYS]
+    arguments = ["record", "-o", str(run_dir / "run.mcap"), "--connect", endpoint,
+                 "--hold", str(RECORD_HOLD), *RECORDED_KEYS]
     if args.namespace:
-        command += ["--namespace", args.namespace]
+        arguments += ["--namespace", args.namespace]
     if args.secure:
-        command += ["--secure", str(args.secure)]  # as the demo: the operator role
-    log_path = run_dir / "record.log"
-    with open(log_path, "w") as log:
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
-    # `balltrack record` says "recording ..." once its subscribers are declared.
-    if wait_until(lambda: process.poll() is not None or "recording " in log_path.read_text(), 30, stop) \
-            and process.poll() is None:
-        return process
-    process.kill()
-    process.wait()
-    if not stop.is_set():
-        print(f"demo: the recorder did not start: {log_path.read_text().strip()[-300:]}", file=sys.stderr)
-    return None
-
-
-def stop_recording(process: subprocess.Popen, run_dir: Path) -> None:
-    """Interrupt the recorder, which writes what it holds and finishes run.mcap."""
-    process.send_signal(signal.SIGINT)
+        arguments += ["--secure", str(args.secure)]  # as the demo: the operator role
+    recorder = Command(arguments, run_dir / "record.log")
     try:
-        process.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
-    if process.returncode != 0:
-        print(f"demo: the recorder exited with status {process.returncode} (see {run_dir}/record.log)",
-              file=sys.stderr)
+        recorder.wait_for("recording ", 30)  # said once its subscribers are declared
+    except RuntimeError as error:
+        recorder.stop()
+        if not stop.is_set():
+            print(f"demo: the recorder did not start: {error}", file=sys.stderr)
+        return None
+    return recorder
+
+
+def stop_recording(recorder: Command, run_dir: Path) -> None:
+    """Stop the recorder, which writes what it holds and finishes run.mcap."""
+    status = recorder.stop(timeout=60)
+    if status != 0:
+        print(f"demo: the recorder exited with status {status} (see {run_dir}/record.log)", file=sys.stderr)
 
 
 def wait_until(predicate, timeout: float, stop: threading.Event) -> bool:

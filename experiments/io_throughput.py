@@ -29,8 +29,9 @@ import zenoh
 
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
+from balltrack.deploy.command import Command
 from balltrack.deploy.launcher import start_system
-from balltrack.experiments.processes import Command, cpu_seconds
+from balltrack.experiments.processes import cpu_seconds
 
 WIDTH, HEIGHT, FPS = 640, 480, 30
 VIDEO_SECONDS = 10

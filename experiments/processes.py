@@ -1,11 +1,7 @@
-"""Processes an experiment starts and watches: ``balltrack`` commands as children, and what a
-running process costs, read from Linux's /proc (CPU time, resident memory)."""
+"""What a running process costs, read from Linux's /proc (CPU time, resident memory); the
+``balltrack`` commands experiments start are ``deploy/command.py``'s :class:`Command`."""
 
 import os
-import re
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 
@@ -29,43 +25,3 @@ def resident_mb(pid: int | None) -> float | None:
     except OSError:
         return None
     return None
-
-
-class Command:
-    """``python -m balltrack ARGUMENTS`` as a child process, its output (stdout and stderr) in
-    ``log``; waits on what it prints."""
-
-    def __init__(self, arguments: list[str], log: Path):
-        self.log = log
-        self._file = open(log, "wb")
-        self.popen = subprocess.Popen([sys.executable, "-m", "balltrack", *arguments], stdout=self._file,
-                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        self.pid = self.popen.pid
-
-    def output(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def wait_for(self, pattern: str, timeout: float = 60.0) -> re.Match:
-        """The first match of the regular expression ``pattern`` in the output, once it comes;
-        RuntimeError when the command exits or ``timeout`` passes first."""
-        deadline = time.monotonic() + timeout
-        while True:
-            found = re.search(pattern, self.output(), re.M)
-            if found:
-                return found
-            if self.popen.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"balltrack {' '.join(self.popen.args[3:])}: no {pattern!r} "
-                                   f"(exit {self.popen.poll()}): {self.output()[-500:]}")
-            time.sleep(0.05)  # polling the log; the deadline bounds it
-
-    def stop(self, timeout: float = 30.0) -> int:
-        """SIGTERM, then the exit status (SIGKILL after ``timeout``)."""
-        if self.popen.poll() is None:
-            self.popen.terminate()
-            try:
-                self.popen.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait()
-        self._file.close()
-        return self.popen.returncode

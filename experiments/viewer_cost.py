@@ -36,7 +36,8 @@ from balltrack.common.network import free_port
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.base import quantile
-from balltrack.experiments.processes import Command, cpu_seconds
+from balltrack.deploy.command import Command
+from balltrack.experiments.processes import cpu_seconds
 from balltrack.experiments.soak import SCENARIO, Counters
 
 WARM_UP_SECONDS = 5.0  # after a viewer starts: its subscriptions routed, the detector drawing
