@@ -19,7 +19,7 @@ import numpy as np
 from balltrack.services.detector.checks import SURE_SIZE, CandidateMetrics, MaskMetrics, measure_mask
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, box_around, disc
-from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes, hue_mask
 
 # Below this saturation (0-255) a pixel is near white and its hue is noise; paler pixels
 # above it must have the target's hue (a highlight on the felt keeps it).
@@ -40,11 +40,8 @@ def pale_pixels(patch_bgr: np.ndarray, config: DetectorConfig, brightness: float
     kernel = config.blur_kernel
     blurred = cv2.GaussianBlur(patch_bgr, (kernel, kernel), 0) if kernel > 1 else patch_bgr
     hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
-    hue, saturation, value = (hsv[:, :, channel] for channel in range(3))
-    if config.h_min <= config.h_max:
-        hue_ok = (hue >= config.h_min) & (hue <= config.h_max)
-    else:
-        hue_ok = (hue >= config.h_min) | (hue <= config.h_max)
+    hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
+    hue_ok = hue_mask(hue, config) == 255
     return (saturation < config.s_min) & (value >= brightness) & ((saturation < NEAR_WHITE) | hue_ok)
 
 

@@ -38,6 +38,14 @@ AREA_KERNEL = np.ones((3, 3), np.uint8)
 EXPLAINED = 128
 
 
+def hue_mask(hue: np.ndarray, config: DetectorConfig) -> np.ndarray:
+    """255 where a hue plane (OpenCV's 0-179) is in the configured range, else 0; the range may
+    wrap through 0 (red)."""
+    if config.h_min <= config.h_max:
+        return cv2.inRange(hue, config.h_min, config.h_max)
+    return cv2.inRange(hue, config.h_min, 179) | cv2.inRange(hue, 0, config.h_max)
+
+
 @dataclass
 class ColourPlanes:
     """Per-frame images shared by the candidate checks (all at processing size)."""
@@ -192,10 +200,7 @@ class ColourMasker:
         if equalised is None:
             equalised = self.equalise(value)
 
-        if config.h_min <= config.h_max:
-            mask = cv2.inRange(hue, config.h_min, config.h_max)
-        else:  # a hue range that wraps through 0 (red)
-            mask = cv2.inRange(hue, config.h_min, 179) | cv2.inRange(hue, 0, config.h_max)
+        mask = hue_mask(hue, config)
         mask &= cv2.inRange(saturation, config.s_min, config.s_max)
         mask &= cv2.inRange(equalised, config.v_min, config.v_max)
         # chroma (max - min channel) = S * V / 255; raw units are these over the gain

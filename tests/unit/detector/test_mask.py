@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.mask import (ColourMasker, brighten, check_image, ellipse_kernel,
+from balltrack.services.detector.mask import (ColourMasker, brighten, check_image, ellipse_kernel, hue_mask,
                                               frame_gain, quarter_sample, reference_level)
 from tests.unit.detector.drawing import coverage, draw_ball, floor, pitch_dark_frame, scene, to_uint8
 
@@ -158,3 +158,11 @@ def test_equalise_is_identity_without_clahe():
     assert stretched.shape == wide.shape
     # local equalisation spreads a narrow range of brightness
     assert int(stretched.max()) - int(stretched.min()) > int(wide.max()) - int(wide.min())
+
+
+def test_hue_mask_takes_the_range_inclusive_and_wraps_through_zero():
+    hue = np.arange(180, dtype=np.uint8).reshape(1, -1)
+    inside = np.flatnonzero(hue_mask(hue, DetectorConfig(h_min=25, h_max=45))[0])
+    assert inside.tolist() == list(range(25, 46))
+    wrapped = np.flatnonzero(hue_mask(hue, DetectorConfig(h_min=170, h_max=8))[0])
+    assert wrapped.tolist() == list(range(0, 9)) + list(range(170, 180))
