@@ -14,6 +14,23 @@ from balltrack.services.detector.geometry import Candidate
 REFINE_ROUNDS = ((0.35, 2.0), (0.2, 1.5), (0.12, 1.2))
 
 
+def solve_symmetric(matrix: tuple[float, float, float, float, float, float],
+                    right: tuple[float, float, float]) -> tuple[float, float, float] | None:
+    """The solution of a symmetric 3x3 system by Cramer's rule, None when it is singular.
+    ``matrix``: its entries (m00, m01, m02, m11, m12, m22). (np.linalg.solve costs more than
+    the fits that call this.)"""
+    m00, m01, m02, m11, m12, m22 = matrix
+    t0, t1, t2 = right
+    c00, c01, c02 = m11 * m22 - m12 * m12, m02 * m12 - m01 * m22, m01 * m12 - m02 * m11
+    determinant = m00 * c00 + m01 * c01 + m02 * c02
+    if abs(determinant) < 1e-9:
+        return None
+    c11, c12, c22 = m00 * m22 - m02 * m02, m01 * m02 - m00 * m12, m00 * m11 - m01 * m01
+    return ((c00 * t0 + c01 * t1 + c02 * t2) / determinant,
+            (c01 * t0 + c11 * t1 + c12 * t2) / determinant,
+            (c02 * t0 + c12 * t1 + c22 * t2) / determinant)
+
+
 def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | None:
     """Algebraic (Kasa) least-squares circle through points given relative to a point near
     their centre: returns its centre (relative to the same point) and radius, or None."""
@@ -23,15 +40,10 @@ def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | N
     # (np.add.reduce is what ndarray.sum calls, without its wrapper: this runs per fit round)
     m02, m12, m22 = float(np.add.reduce(dx)), float(np.add.reduce(dy)), float(dx.size)
     t0, t1, t2 = float(dx @ squared), float(dy @ squared), float(np.add.reduce(squared))
-    # Cramer's rule on the symmetric 3x3 normal equations.
-    c00, c01, c02 = m11 * m22 - m12 * m12, m02 * m12 - m01 * m22, m01 * m12 - m02 * m11
-    determinant = m00 * c00 + m01 * c01 + m02 * c02
-    if abs(determinant) < 1e-9:
+    solved = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
+    if solved is None:
         return None
-    c11, c12, c22 = m00 * m22 - m02 * m02, m01 * m02 - m00 * m12, m00 * m11 - m01 * m01
-    a = (c00 * t0 + c01 * t1 + c02 * t2) / determinant
-    b = (c01 * t0 + c11 * t1 + c12 * t2) / determinant
-    c = (c02 * t0 + c12 * t1 + c22 * t2) / determinant
+    a, b, c = solved
     centre_x, centre_y = a / 2.0, b / 2.0
     radius_squared = c + centre_x * centre_x + centre_y * centre_y
     if not math.isfinite(radius_squared) or radius_squared <= 0:
@@ -48,19 +60,16 @@ def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius:
         ux, uy = dx / distance, dy / distance
         residual = distance - radius
         # normal equations of the Jacobian (-ux, -uy, -1)
-        cross, sum_x, sum_y = ux @ uy, np.add.reduce(ux), np.add.reduce(uy)
-        normal = np.array([[ux @ ux, cross, sum_x], [cross, uy @ uy, sum_y],
-                           [sum_x, sum_y, float(ux.size)]])
-        gradient = np.array([ux @ residual, uy @ residual, np.add.reduce(residual)])
-        try:
-            delta = np.linalg.solve(normal, gradient)
-        except np.linalg.LinAlgError:
+        delta = solve_symmetric((float(ux @ ux), float(ux @ uy), float(np.add.reduce(ux)), float(uy @ uy),
+                                 float(np.add.reduce(uy)), float(ux.size)),
+                                (float(ux @ residual), float(uy @ residual), float(np.add.reduce(residual))))
+        if delta is None:
             break
-        shift_x, shift_y, growth = delta.tolist()
+        shift_x, shift_y, growth = delta
         if not (math.isfinite(shift_x) and math.isfinite(shift_y) and math.isfinite(growth)):
             break
         x, y, radius = x + shift_x, y + shift_y, radius + growth
-        if float(np.add.reduce(np.abs(delta))) < 1e-3:
+        if abs(shift_x) + abs(shift_y) + abs(growth) < 1e-3:
             break
     return x, y, radius
 
