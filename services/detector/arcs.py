@@ -6,7 +6,9 @@ one blob, yet the part of its outline in view is still an arc of a circle. Where
 meet, the blob's outline turns inwards (a concave point, a defect of its convex hull); between
 those points it runs along one ball's rim. So the outline is cut at its concave points and a
 circle is fitted to each piece: a piece that is a long, even arc of a circle proposes that
-circle, however little of the ball's disc the mask shows apart from its neighbours.
+circle, however little of the ball's disc the mask shows apart from its neighbours. Where the
+mask has filled the meeting on one side, the outline of two balls is cut across the blob's
+waist instead (see WAIST_ELONGATION).
 """
 
 import math
