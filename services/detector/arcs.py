@@ -6,7 +6,9 @@ one blob, yet the part of its outline in view is still an arc of a circle. Where
 meet, the blob's outline turns inwards (a concave point, a defect of its convex hull); between
 those points it runs along one ball's rim. So the outline is cut at its concave points and a
 circle is fitted to each piece: a piece that is a long, even arc of a circle proposes that
-circle, however little of the ball's disc the mask shows apart from its neighbours.
+circle, however little of the ball's disc the mask shows apart from its neighbours. Where the
+mask has filled the meeting on one side, the outline of two balls is cut across the blob's
+waist instead (see WAIST_ELONGATION).
 """
 
 import math
@@ -30,6 +32,15 @@ ARC_TOLERANCE = 0.08
 ARC_MIN_SPAN = math.radians(120)
 # Rounds of fitting, each keeping the points within this share of the radius of the last circle.
 ARC_ROUNDS = (0.25, 0.15, ARC_TOLERANCE)
+# Two overlapping balls whose neck the mask's closing (or a shadow, a blur) has filled on one
+# side leave at most one concave point, yet their blob is still WAIST_ELONGATION times longer
+# than wide (one ball's disc is round) and has a waist where they meet: across its middle
+# (WAIST_MIDDLE of its length each side of its centre) it is narrower, by WAIST_DEPTH, than
+# at its widest on each side (two discs are; a wedge, a bar or an ellipse is not). Its outline
+# is then cut across the waist into the two balls' rims.
+WAIST_ELONGATION = 1.3
+WAIST_MIDDLE = 0.25
+WAIST_DEPTH = 1.1
 
 
 def deepest_cut(points: np.ndarray, depth: float) -> int | None:
@@ -71,9 +82,10 @@ def cut_piece(piece: np.ndarray, depth: float) -> list[np.ndarray]:
 
 
 def outline_pieces(blob: np.ndarray) -> list[np.ndarray]:
-    """The outline of the largest blob of a 0/255 image cut at its concave points: a list of
-    (n x 2) float arrays of pixel positions in order; [] when the outline has no concave point
-    (a convex blob: its enclosing circle is proposed already)."""
+    """The outline of the largest blob of a 0/255 image cut at its concave points, or across
+    its waist when they leave fewer than two pieces (see WAIST_ELONGATION): a list of (n x 2)
+    float arrays of pixel positions (in order along the outline unless cut at the waist); []
+    when the outline has neither (a convex blob: its enclosing circle is proposed already)."""
     contours, _ = cv2.findContours(blob, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return []
@@ -83,11 +95,48 @@ def outline_pieces(blob: np.ndarray) -> list[np.ndarray]:
     points = contour.reshape(-1, 2).astype(np.float64)
     depth = max(ARC_CUT_DEPTH, ARC_CUT_SHARE * math.sqrt(cv2.contourArea(contour) / math.pi))
     first = deepest_cut(points, depth)
-    if first is None:
+    pieces: list[np.ndarray] = []
+    if first is not None:
+        # (the closed outline opened at its deepest concave point, then cut further)
+        opened = np.concatenate([points[first:], points[:first + 1]])
+        pieces = [piece for piece in cut_piece(opened, depth) if len(piece) >= ARC_MIN_POINTS]
+    if len(pieces) >= 2:
+        return pieces
+    return waist_pieces(points, blob) or pieces
+
+
+def waist_pieces(points: np.ndarray, blob: np.ndarray) -> list[np.ndarray]:
+    """The points of a blob's closed outline on either side of its waist (see
+    WAIST_ELONGATION): two pieces; [] when the blob is not that elongated or has no waist."""
+    moments = cv2.moments(blob, binaryImage=True)
+    if moments["m00"] <= 0:
         return []
-    # (the closed outline opened at its deepest concave point, then cut further)
-    opened = np.concatenate([points[first:], points[:first + 1]])
-    return [piece for piece in cut_piece(opened, depth) if len(piece) >= ARC_MIN_POINTS]
+    centre_x, centre_y = moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]
+    angle = 0.5 * math.atan2(2.0 * moments["mu11"], moments["mu20"] - moments["mu02"])
+    along_x, along_y = math.cos(angle), math.sin(angle)
+    dx, dy = points[:, 0] - centre_x, points[:, 1] - centre_y
+    along = dx * along_x + dy * along_y
+    across = -dx * along_y + dy * along_x
+    length = float(along.max() - along.min())
+    width = float(across.max() - across.min())
+    if length < WAIST_ELONGATION * width:
+        return []
+    # The blob's width at each step along its axis: how many of its pixels lie there.
+    rows, columns = np.nonzero(blob)
+    steps = np.rint((columns - centre_x) * along_x + (rows - centre_y) * along_y).astype(np.intp)
+    first_step = int(steps.min())
+    widths = np.bincount(steps - first_step).astype(np.float64)
+    positions = np.arange(len(widths)) + first_step
+    middle = np.abs(positions - 0.5 * (along.max() + along.min())) <= WAIST_MIDDLE * length
+    if not middle.any():
+        return []
+    narrowest = int(np.argmin(np.where(middle, widths, np.inf)))
+    if not (widths[:narrowest].max(initial=0.0) >= WAIST_DEPTH * widths[narrowest]
+            and widths[narrowest + 1:].max(initial=0.0) >= WAIST_DEPTH * widths[narrowest]):
+        return []
+    waist = narrowest + first_step
+    pieces = [points[along < waist - 0.5], points[along > waist + 0.5]]
+    return [piece for piece in pieces if len(piece) >= ARC_MIN_POINTS]
 
 
 def arc_circle(piece: np.ndarray) -> tuple[float, float, float] | None:

@@ -8,8 +8,8 @@ module of this package:
    are classified on wider averages.
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
    a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
-   of the long round pieces of its outline between concave points (a ball partly hidden
-   behind another).
+   of the long round pieces of its outline between concave points or across its waist (a
+   ball partly hidden behind another).
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
@@ -17,7 +17,8 @@ module of this package:
    that fails again with the pale, bright pixels around it joined to the mask (a washed-out
    highlight that leaves only a crescent of colour).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
-   touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
+   touching a found one, a two-colour ball); what they leave of their blobs is searched as
+   any blob is (the rest of a heap). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
    itself, to a fraction of a pixel. Balls smaller than ``small_radius`` are kept only when
    their outline is found; the others keep the mask's circle when it is not (clutter all
@@ -145,20 +146,26 @@ class BallDetector:
         search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
-            found = self._blob_candidates(contour, search, shape_mask)
-            if found is None:
-                continue
-            measured.extend(found)
-            if any(metrics.clean for _, metrics in found):
-                continue  # one isolated round blob: nothing for Hough to split
-            proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
-            in_blob = self._measure_proposals(proposals, search, shape_mask)
-            blob, left, top = blob_image(contour, shape_mask)
-            arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
-            in_blob.extend(self._arc_candidates(arcs, search, shape_mask))
-            measured.extend(in_blob)
-            measured.extend(self._cluster_candidates(contour, search, shape_mask, found + in_blob, arcs))
+            measured.extend(self._contour_candidates(contour, search, shape_mask))
         return self._accept(measured, search)
+
+    def _contour_candidates(self, contour: np.ndarray, search: FrameSearch,
+                            mask: np.ndarray) -> list[Measured]:
+        """Every candidate of one blob of ``mask``, measured on it: its enclosing circle and,
+        unless that is a clean isolated ball, Hough's circles, its outline arcs' circles and
+        the members of the cluster of balls it may be."""
+        found = self._blob_candidates(contour, search, mask)
+        if found is None:
+            return []
+        if any(metrics.clean for _, metrics in found):
+            return found  # one isolated round blob: nothing for Hough to split
+        proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
+        in_blob = self._measure_proposals(proposals, search, mask)
+        blob, left, top = blob_image(contour, mask)
+        arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
+        in_blob.extend(self._arc_candidates(arcs, search, mask))
+        return (found + in_blob
+                + self._cluster_candidates(contour, search, mask, found + in_blob, arcs))
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
                          mask: np.ndarray) -> list[Measured] | None:
@@ -290,7 +297,9 @@ class BallDetector:
         Mask belonging to an accepted ball is not clutter for the balls around it, so after
         each round the accepted balls are erased from the mask: candidates near them are
         measured again, and what is left of their blobs (a ball touching a found one, e.g. a
-        two-colour ball against a plain one) is searched again for enclosing circles.
+        two-colour ball against a plain one, the rest of a heap of balls) is searched again as
+        any blob is: once its found balls are gone, the rest of a heap may be a plain cluster
+        or pair of balls, which its enclosing circle alone would take for one.
         """
         config = self.config
         for candidate, metrics in measured:
@@ -359,14 +368,14 @@ class BallDetector:
 
     def _leftover_candidates(self, balls: list[Candidate], explained: np.ndarray,
                              search: FrameSearch) -> list[Measured]:
-        """Enclosing circles of the mask pieces left next to freshly accepted balls, judged."""
+        """The candidates of the mask pieces left next to freshly accepted balls (see
+        _contour_candidates), judged."""
         results: list[Measured] = []
         for contour in leftover_blobs(balls, explained):
-            found = self._blob_candidates(contour, search, explained)
-            if found:
-                for candidate, metrics in found:
-                    candidate.score = judge(metrics, self.config) or 0.0
-                results.extend(found)
+            found = self._contour_candidates(contour, search, explained)
+            for candidate, metrics in found:
+                candidate.score = judge(metrics, self.config) or 0.0
+            results.extend(found)
         return results
 
 

@@ -229,6 +229,15 @@ def inscribed_discs(contour: np.ndarray, search: FrameSearch,
     ``taken`` circles leave of the blob, largest first, in frame coordinates; they propose the
     balls of a cluster of touching balls."""
     blob, left, top = blob_image(contour, search.mask)
+    # A ball cut by the frame edge goes on past it: the frame's border is not the blob's edge
+    # (as for the circle fit), and the distance transform counts no distance to the image's
+    # own border, so the canvas loses its blank margin there.
+    height, width = search.mask.shape
+    first_row, first_column = (1 if top + 1 == 0 else 0), (1 if left + 1 == 0 else 0)
+    last_row = blob.shape[0] - (1 if top + blob.shape[0] - 1 == height else 0)
+    last_column = blob.shape[1] - (1 if left + blob.shape[1] - 1 == width else 0)
+    blob = np.ascontiguousarray(blob[first_row:last_row, first_column:last_column])
+    left, top = left + first_column, top + first_row
     area = cv2.countNonZero(blob)
     for circle in taken:
         cv2.circle(blob, (int(round(circle.x - left)), int(round(circle.y - top))),

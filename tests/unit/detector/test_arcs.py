@@ -68,3 +68,26 @@ def test_balls_in_a_row_are_cut_apart_on_both_sides():
     for x, y in centres:
         found = nearest(circles, x, y)
         assert math.hypot(found.x - x, found.y - y) < 2.0 and abs(found.radius - 20.0) < 1.5
+
+
+def test_overlapping_balls_with_one_neck_filled_are_cut_across_their_waist():
+    # one concave point is left where the balls meet (the other side filled, as the mask's
+    # closing or a shadow does): the blob's waist parts the two rims
+    mask = disc(SHAPE, 140.0, 120.0, 20.0) | disc(SHAPE, 170.0, 120.0, 20.0)
+    cv2.fillPoly(mask, [np.array([[140, 120], [170, 120], [170, 140], [140, 140]], np.int32)], 255)
+    assert len(outline_pieces(mask)) == 2
+    circles = arc_proposals(mask, 0, 0, 5.0, 120.0)
+    for x in (140.0, 170.0):
+        found = nearest(circles, x, 120.0)
+        assert math.hypot(found.x - x, found.y - 120.0) < 1.5 and abs(found.radius - 20.0) < 1.5
+
+
+def test_elongated_blobs_without_a_waist_are_not_cut():
+    ellipse = np.zeros(SHAPE, np.uint8)
+    cv2.ellipse(ellipse, (160, 120), (50, 22), 30, 0, 360, 255, -1)
+    assert outline_pieces(ellipse) == []
+    # a wedge with one concave point: wider at one end only
+    wedge = np.zeros(SHAPE, np.uint8)
+    cv2.fillPoly(wedge, [np.array([[60, 100], [240, 70], [240, 170], [60, 140]], np.int32)], 255)
+    cv2.circle(wedge, (150, 160), 12, 0, -1)
+    assert len(outline_pieces(wedge)) <= 1

@@ -25,6 +25,8 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import (BallDetector, Detection, DetectionResult,
                                                   acceptance_order, without_contained)
 from balltrack.services.detector.geometry import Candidate
+from balltrack.services.detector.mask import EXPLAINED
+from balltrack.services.detector.proposals import fill_holes, frame_search
 from tests import harness
 from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_lit_from_above, floor,
                                          pitch_dark_frame, scene, to_uint8)
@@ -141,6 +143,23 @@ def test_a_heap_of_touching_balls_of_flat_colour(detector):
     assert len(result.detections) == len(balls), result.detections
     for u, v, radius in balls:
         assert_found(result.detections, u, v, radius, centre_tolerance=2.0, radius_tolerance=0.1)
+
+
+def test_what_a_found_ball_leaves_of_a_heap_is_searched_as_a_blob(detector):
+    # two touching balls left beside a found one: split as any blob is, not taken as one
+    # circle round both
+    found, pair = (300.0, 240.0, 30.0), [(342.0, 275.0, 22.0), (386.0, 275.0, 22.0)]
+    planes = detector._masker.planes(scene([found, *pair]))
+    _, shape_mask = fill_holes(planes.mask, planes.extent)
+    search = frame_search(planes, detector.config, 1.0, shape_mask)
+    explained = search.mask.copy()
+    cv2.circle(explained, (300, 240), int(math.ceil(1.08 * 30.0 + 1)), EXPLAINED, -1)
+    candidates = detector._leftover_candidates([Candidate(*found)], explained, search)
+    for u, v, radius in pair:
+        best = max((candidate for candidate, _ in candidates
+                    if math.hypot(candidate.x - u, candidate.y - v) < 1.0
+                    and abs(candidate.radius - radius) < 1.0), key=lambda candidate: candidate.score)
+        assert best.score >= 0.9
 
 
 def test_detections_are_sorted_largest_first(detector):
@@ -453,9 +472,9 @@ def test_pitch_dark_distractors_give_nothing(detector):
 
 
 # Figures with the defaults when they were last changed (recall, false positives per image):
-# tennis_floor_dev 0.844, 0.12; tennis_indoor_dev 0.872, 0.17 (real_tennis_dev: see above).
+# tennis_floor_dev 0.871, 0.12; tennis_indoor_dev 0.872, 0.17 (real_tennis_dev: see above).
 # A floor a little below them: no change may quietly lose what these photos measure.
-DEV_SET_FLOORS = {"tennis_floor_dev": (0.83, 0.14), "tennis_indoor_dev": (0.86, 0.18)}
+DEV_SET_FLOORS = {"tennis_floor_dev": (0.865, 0.14), "tennis_indoor_dev": (0.86, 0.18)}
 
 
 @pytest.mark.parametrize("name", sorted(DEV_SET_FLOORS))

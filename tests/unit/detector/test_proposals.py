@@ -196,6 +196,22 @@ def test_a_cluster_of_touching_balls_splits_into_inscribed_discs_that_cover_it()
     assert math.hypot(third.x - centres[2][0], third.y - centres[2][1]) < 3.0
 
 
+@pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
+def test_a_ball_cut_by_the_frame_edge_keeps_its_inscribed_disc(side):
+    # a ball touching one whose centre lies 6 px inside the frame's edge: the frame's border
+    # is not the blob's edge, so its disc is about its own size, not the sliver's (its centre
+    # on the border, where the blob is widest: the refinement on the mask's boundary follows)
+    height, width = SHAPE
+    inside, cut = {"left": ((60.0, 120.0), (6.0, 120.0)), "right": ((width - 61.0, 120.0), (width - 7.0, 120.0)),
+                   "top": ((160.0, 60.0), (160.0, 6.0)), "bottom": ((160.0, height - 61.0), (160.0, height - 7.0))}[side]
+    mask = disc(SHAPE, *inside, 28.0) | disc(SHAPE, *cut, 26.0)
+    [blob] = fill_holes(mask)[0]
+    discs = inscribed_discs(blob, search_of(mask), [])
+    nearest = min(discs, key=lambda found: math.hypot(found.x - cut[0], found.y - cut[1]))
+    assert math.hypot(nearest.x - cut[0], nearest.y - cut[1]) < 8.0 and abs(nearest.radius - 26.0) < 3.0
+    assert blob_cover(blob, mask, discs) >= CLUSTER_COVER
+
+
 def test_a_strip_is_not_covered_by_its_inscribed_discs():
     strip = np.zeros(SHAPE, np.uint8)
     strip[100:120, 40:280] = 255
