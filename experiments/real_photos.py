@@ -40,6 +40,7 @@ import numpy as np
 
 from balltrack.common.config import ConfigError, load_config
 from balltrack.experiments.detector_speed import PlainDetector
+from balltrack.experiments.photo_variants import VARIANTS, Variant
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
 
@@ -93,9 +94,11 @@ def score_image(boxes: list[dict], detections: list, min_ball_px: int = MIN_BALL
     return {"labelled": len(counted), "found": found, "false_positives": false_positives}
 
 
-def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | None = None) -> dict:
+def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | None = None,
+                 variant: "Variant | None" = None) -> dict:
     """Run a detector (default: balltrack's with ``config``) over every labelled image in
-    ``folder`` and score it.
+    ``folder`` and score it; ``variant``: each image and its boxes altered first (see
+    ``photo_variants.py``).
 
     Returns ``recall`` (found / labelled), ``false_positives_per_image``, ``found``,
     ``labelled``, ``false_positives``, ``images``, ``median_ms`` (detector time per image) and
@@ -111,10 +114,13 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
         image = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
         if image is None:
             raise FileNotFoundError(f"{folder / name}: missing or not an image")
+        boxes = labels[name]
+        if variant is not None:
+            image, boxes = variant(image, boxes)
         started = time.perf_counter()
         detections = detect(image)
         timings.append((time.perf_counter() - started) * 1000.0)
-        entry = score_image(labels[name], detections)
+        entry = score_image(boxes, detections)
         entry["detections"] = [{"u": round(d.u, 1), "v": round(d.v, 1),
                                 "radius_px": round(d.radius_px, 1), "score": d.score}
                                for d in detections]
@@ -207,6 +213,10 @@ def run(options) -> "ExperimentResult":
                        f"false positives per image ({ours['images']} images)")
     result.table(SUMMARY_HEADERS, summary_rows(scores),
                  "Per set, the balltrack detector beside the paper's plain pipeline on the same photos:")
+    if not options.quick:
+        result.table(["variant"] + list(scores), variant_rows(folders, config),
+                     "How the balltrack figures hold up on altered copies of the photos (see "
+                     "photo_variants.py; reported only, nothing is tuned on them):")
     for name, both in scores.items():
         result.table(["image", "balls counted", "found", "false positives", "detections (u, v, r)"],
                      [[image, entry["labelled"], entry["found"], entry["false_positives"],
@@ -242,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-plain", action="store_true", help="leave out the plain pipeline")
     parser.add_argument("--summary", action="store_true", help="only the per-set table")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON")
+    parser.add_argument("--variants", action="store_true",
+                        help="also score altered copies of the photos (mirrored, smaller, exposure, "
+                             "white balance, JPEG, noise: see photo_variants.py), balltrack only")
     args = parser.parse_args(argv)
     try:
         config = load_config(DetectorConfig, args.config, args.set, section="detector")
@@ -267,7 +280,28 @@ def main(argv: list[str] | None = None) -> int:
           f"{'plain pipeline':<36} goal (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
     for name, images, balls, ours, plain, goal in summary_rows(scores):
         print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {goal}")
+    if args.variants:
+        print_variants(folders, config)
     return 0
+
+
+def variant_rows(folders: list[Path], config: DetectorConfig) -> list[list[str]]:
+    """Per variant of the photos (photo_variants.VARIANTS): its name, then each set's balltrack
+    figures and the goal's verdict."""
+    rows = []
+    for variant_name, variant in VARIANTS.items():
+        row = [variant_name]
+        for folder in folders:
+            scored = score_folder(folder, detect=balltrack_detect(config), variant=variant)
+            row.append(f"{_figures(scored)} {'PASS' if meets_goal(scored) else 'MISS'}")
+        rows.append(row)
+    return rows
+
+
+def print_variants(folders: list[Path], config: DetectorConfig) -> None:
+    print(f"\n{'variant':<14} " + " ".join(f"{folder.name:<36}" for folder in folders))
+    for row in variant_rows(folders, config):
+        print(f"{row[0]:<14} " + " ".join(f"{cell:<36}" for cell in row[1:]), flush=True)
 
 
 if __name__ == "__main__":

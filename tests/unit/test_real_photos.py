@@ -4,8 +4,9 @@ drawn photos (the real sets are not in the repository; see tests/unit/detector f
 import json
 
 import cv2
+import numpy as np
 
-from balltrack.experiments import real_photos
+from balltrack.experiments import photo_variants, real_photos
 from balltrack.services.detector.config import DetectorConfig
 from tests.unit.detector.drawing import scene
 
@@ -63,3 +64,28 @@ def test_experiment_reports_a_goal_per_set(tmp_path):
     assert all(goal.passed for goal in result.goals)
     assert result.figures["real_photos/one/balltrack/recall"] == 1.0
     assert "real_photos/two/plain/recall" in result.figures
+
+
+def test_variants_move_the_boxes_with_the_image():
+    image = np.zeros((100, 200, 3), np.uint8)
+    image[10:30, 20:50] = (40, 200, 180)
+    box = {"x": 20.0, "y": 10.0, "w": 30.0, "h": 20.0}
+    flipped, [flipped_box] = photo_variants.mirrored(image, [box])
+    assert flipped_box == {"x": 150.0, "y": 10.0, "w": 30.0, "h": 20.0}
+    assert flipped[10:30, 150:180].min() > 0 and not flipped[:, :150].any()
+    smaller, [smaller_box] = photo_variants.scaled(0.5)(image, [box])
+    assert smaller.shape == (50, 100, 3) and smaller_box == {"x": 10.0, "y": 5.0, "w": 15.0, "h": 10.0}
+    grey = np.full((8, 8, 3), 100, np.uint8)
+    warmer, _ = photo_variants.white_balanced(red=1.1, blue=0.9)(grey, [])
+    assert tuple(warmer[0, 0]) == (90, 100, 110)  # BGR: blue down, red up
+    assert photo_variants.exposed(1.4)(grey, [])[0][0, 0, 0] == 140
+    noisy, _ = photo_variants.noisy(6.0)(grey, [])
+    assert np.array_equal(noisy, photo_variants.noisy(6.0)(grey, [])[0]) and noisy.std() > 3
+
+
+def test_each_variant_is_scored_per_set(tmp_path):
+    write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)], [(420.0, 150.0, 40.0)]])
+    rows = real_photos.variant_rows(real_photos.photo_sets(tmp_path), DetectorConfig())
+    assert [row[0] for row in rows] == list(photo_variants.VARIANTS)
+    mirrored = dict((row[0], row[1]) for row in rows)["mirrored"]
+    assert mirrored.startswith("1.000 (2/2)") and mirrored.endswith("PASS")
