@@ -126,13 +126,16 @@ def test_colour_that_does_not_reach_the_outline_is_no_lit_rim():
     assert lit_rim_support(planes.frame, planes.mask, Candidate(U, V, RADIUS)) == 0.0
 
 
-def test_second_look_passes_over_dull_overlapping_and_surplus_candidates():
+def test_second_look_passes_over_dull_orange_overlapping_and_surplus_candidates():
     config = DetectorConfig()
     planes = ColourMasker(config).planes(black_side_frame())
     search = frame_search(planes, config, 1.0)
     cap = lit_cap(planes)
     dull = CandidateMetrics(CAP_METRICS.mask, ColourMetrics(0.1, 36.0, 100.0, 36.0, 0.1), size=4.0)
     assert second_look([(cap, dull)], [], planes.mask, search, config, WIDE_REACH) == []
+    # its colour at the range's orange end (a yellow box with a black stripe, wood, a lamp)
+    orange = CandidateMetrics(CAP_METRICS.mask, ColourMetrics(0.6, 25.5, 100.0, 25.5, 0.6), size=4.0)
+    assert second_look([(cap, orange)], [], planes.mask, search, config, WIDE_REACH) == []
     already = Candidate(U, V, RADIUS, score=0.9)
     assert second_look([(cap, CAP_METRICS)], [already], planes.mask, search, config,
                        WIDE_REACH) == [already]
