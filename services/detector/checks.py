@@ -111,6 +111,7 @@ class CandidateMetrics:
     size: float               # radius over small_radius: below 1, a small ball
     dark_side: bool = False   # accepted by the dark-side second look (dark.py)
     highlighted: bool = False  # measured with its washed-out highlight (highlight.py)
+    partly_hidden: bool = False  # measured on its part in view (occlusion.py)
 
     @property
     def clean(self) -> bool:

@@ -15,13 +15,14 @@ module of this package:
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
    the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
    that fails again with the pale, bright pixels around it joined to the mask (a washed-out
-   highlight that leaves only a crescent of colour).
+   highlight that leaves only a crescent of colour); ``occlusion.py`` one whose mask ends along
+   a straight edge across its disc with the part past that edge hidden (a ball behind a wall).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
    touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
    itself, to a fraction of a pixel. Balls smaller than ``small_radius`` are kept only when
    their outline is found; the others keep the mask's circle when it is not (clutter all
-   round, too little of the rim in view).
+   round, too little of the rim in view), and partly hidden balls keep it always.
 9. ``dark.py``: a few rejected candidates with something dark around them get a second look
    for a ball whose unlit side is black.
 
@@ -56,6 +57,7 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.occlusion import measured_in_view
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
                                                    blob_proposals, fill_holes, frame_search, hough_proposals,
@@ -206,6 +208,7 @@ class BallDetector:
                     highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
                     if judge(highlighted, self.config) is not None:
                         metrics = highlighted
+            metrics = measured_in_view(candidate, metrics, mask, self.config)
             results.append((candidate, metrics))
         return results
 
@@ -310,6 +313,7 @@ class BallDetector:
                                              for other in accepted + newly):
                     candidate.score = score
                     candidate.needs_outline = metrics.size < 1.0
+                    candidate.partly_hidden = metrics.partly_hidden
                     newly.append(candidate)
                 else:
                     still.append((candidate, metrics))
@@ -328,7 +332,7 @@ class BallDetector:
                     if remeasured is None:
                         continue
                     # (on the colour mask alone: a highlight joined to it is measured once)
-                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False)
+                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False, partly_hidden=False)
                 pending.append((candidate, metrics))
             pending.extend(self._leftover_candidates(newly, explained, search))
             pending.sort(key=acceptance_order, reverse=True)
@@ -347,8 +351,9 @@ class BallDetector:
         reach = DARK_WIDE_REACH if planes.dark else WIDE_REACH
         kept: list[Candidate] = []
         for ball in accepted:
-            outline = silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
-                                 [other for other in accepted if other is not ball], reach)
+            outline = None if ball.partly_hidden else silhouette(
+                planes.frame, planes.mask, planes.gain, planes.reference, ball,
+                [other for other in accepted if other is not ball], reach)
             if outline is not None:
                 ball.x, ball.y, ball.radius = outline
             elif ball.needs_outline:
