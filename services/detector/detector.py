@@ -15,8 +15,9 @@ module of this package:
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
    the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
    that fails again with the pale, bright pixels around it joined to the mask (a washed-out
-   highlight that leaves only a crescent of colour); ``occlusion.py`` one whose mask ends along
-   a straight edge across its disc with the part past that edge hidden (a ball behind a wall).
+   highlight that leaves only a crescent of colour, whose outer arc's circle it proposes);
+   ``occlusion.py`` one whose mask ends along a straight edge across its disc with the part
+   past that edge hidden (a ball behind a wall).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
    touching a found one, a two-colour ball). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
@@ -55,7 +56,7 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
-from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
+from balltrack.services.detector.highlight import crescent_candidates, highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
 from balltrack.services.detector.occlusion import measured_in_view
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
@@ -155,6 +156,8 @@ class BallDetector:
                 continue  # one isolated round blob: nothing for Hough to split
             proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
             in_blob = self._measure_proposals(proposals, search, shape_mask)
+            in_blob.extend(crescent_candidates(contour, shape_mask, search.planes, search.small_radius,
+                                               search.max_radius, self.config))
             blob, left, top = blob_image(contour, shape_mask)
             arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
             in_blob.extend(self._arc_candidates(arcs, search, shape_mask))

@@ -9,15 +9,22 @@ where the ball does. So a large candidate that fails its checks is measured agai
 colour mask joined with the pale, bright pixels around it; white clutter around a yellow-green
 patch (paper, a wall, the sky) goes on past the circle and fails that measurement's leak and
 outside checks, as a large area of colour does.
+
+When the highlight covers nearly all of the ball, the colour left is a crescent on its shaded
+side, whose enclosing circle and Hough circles (within the crescent's box) are not the ball's:
+such a blob proposes the circle of its outer arc, the ball's rim (``crescent_candidates``).
 """
 
+import dataclasses
 import math
 
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import SURE_SIZE, CandidateMetrics, MaskMetrics, measure_mask
+from balltrack.services.detector.checks import (SURE_SIZE, CandidateMetrics, MaskMetrics, colour_stats, judge,
+                                                measure_mask)
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.fit import robust_circle
 from balltrack.services.detector.geometry import Candidate, box_around, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes, hue_mask
 
@@ -27,11 +34,29 @@ NEAR_WHITE = 25
 # The candidates looked at again: at least SURE_SIZE times small_radius (a highlight on a
 # few pixels of colour cannot be told from a glint on clutter), failing on their fill.
 HIGHLIGHT_SIZE = SURE_SIZE
+# A highlight across most of a ball leaves a crescent of colour, which no blob's enclosing
+# circle or Hough circle within its box finds. Its convex hull is the crescent's outer arc,
+# the ball's rim, closed by the chord between its horns: at least CRESCENT_POINTS of the hull's
+# vertices lie within CRESCENT_TOLERANCE (of the radius) of one circle, CRESCENT_SPAN round it,
+# and the blob covers at most CRESCENT_COVER of that circle (more: a disc with a notch, whose
+# enclosing circle is proposed already).
+CRESCENT_POINTS = 10
+CRESCENT_TOLERANCE = ((0.1, 1.5), (0.05, 1.0))
+CRESCENT_SPAN = math.radians(120)
+CRESCENT_COVER = 0.5
 
 
 def needs_highlight(metrics: CandidateMetrics, config: DetectorConfig) -> bool:
-    """Whether a measured candidate may be a ball whose highlight the colour mask misses."""
-    return metrics.size >= HIGHLIGHT_SIZE and metrics.mask.fill < config.min_fill_ratio
+    """Whether a measured candidate may be a ball whose highlight the colour mask misses.
+
+    (Joining the highlight only adds mask: the leak and outside only grow, and the rim's
+    support is at most 1 - leak. A candidate whose leak and outside already fail judge's rim
+    support or outside check fails them joined as well, and is not measured again.)
+    """
+    on_mask = metrics.mask
+    return (metrics.size >= HIGHLIGHT_SIZE and on_mask.fill < config.min_fill_ratio
+            and on_mask.outside <= config.max_outside_ratio
+            and 1.0 - on_mask.leak >= config.min_edge_support + on_mask.leak + on_mask.outside)
 
 
 def pale_pixels(patch_bgr: np.ndarray, config: DetectorConfig, brightness: float) -> np.ndarray:
@@ -69,3 +94,63 @@ def highlight_metrics(candidate: Candidate, mask: np.ndarray, planes: ColourPlan
     # (accepted balls stay explained: a highlight is no reason to measure them again)
     joined[patch_mask == EXPLAINED] = EXPLAINED
     return measure_mask(Candidate(x - left, y - top, radius), joined)
+
+
+def crescent_candidates(contour: np.ndarray, mask: np.ndarray, planes: ColourPlanes, small_radius: float,
+                        max_radius: float, config: DetectorConfig) -> list[tuple[Candidate, CandidateMetrics]]:
+    """The circle of a crescent blob's outer arc (see crescent_circle), measured on ``mask``
+    (with its highlight when that makes it pass); [] when the blob is no crescent."""
+    circle = crescent_circle(contour, small_radius, max_radius)
+    if circle is None:
+        return []
+    on_mask = measure_mask(circle, mask)
+    if on_mask is None:
+        return []
+    metrics = CandidateMetrics(on_mask, colour_stats(circle, planes), size=circle.radius / small_radius)
+    if needs_highlight(metrics, config) and judge(metrics, config) is None:
+        joined = highlight_metrics(circle, mask, planes, config)
+        if joined is not None:
+            highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
+            if judge(highlighted, config) is not None:
+                metrics = highlighted
+    return [(circle, metrics)]
+
+
+def crescent_circle(contour: np.ndarray, small_radius: float, max_radius: float) -> Candidate | None:
+    """The circle of a crescent blob's outer arc (see CRESCENT_POINTS), when the blob is one
+    and the circle is large enough to be looked at with its highlight; else None.
+
+    Fitted to the hull's vertices, then to the outline's pixels near it: not refined on the
+    mask's boundary as other proposals are, whose pixels near the circle include the
+    crescent's inner arc and would pull it inwards.
+    """
+    # (an arc of CRESCENT_SPAN or more has an enclosing circle of at least sin(span / 2) of its
+    # radius: a blob too full of that circle cannot cover at most CRESCENT_COVER of its own)
+    _, enclosing = cv2.minEnclosingCircle(contour)
+    area = cv2.contourArea(contour)
+    if area > CRESCENT_COVER * math.pi * (enclosing / math.sin(CRESCENT_SPAN / 2)) ** 2:
+        return None
+    hull = cv2.convexHull(contour).reshape(-1, 2).astype(np.float64)
+    if len(hull) < CRESCENT_POINTS:
+        return None
+    px, py = hull[:, 0], hull[:, 1]
+    fitted = robust_circle(px, py, float(px.mean()), float(py.mean()), float(enclosing),
+                           ((0.5, 3.0),) + CRESCENT_TOLERANCE, geometric=False)
+    if fitted is None:
+        return None
+    centre_x, centre_y, radius, on_circle = fitted
+    if (np.count_nonzero(on_circle) < CRESCENT_POINTS
+            or area > CRESCENT_COVER * math.pi * radius * radius
+            or not HIGHLIGHT_SIZE * small_radius <= radius <= max_radius):
+        return None
+    angles = np.sort(np.arctan2(py[on_circle] - centre_y, px[on_circle] - centre_x))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * math.pi]))
+    if 2 * math.pi - float(gaps.max()) < CRESCENT_SPAN:
+        return None
+    outline = contour.reshape(-1, 2).astype(np.float64)
+    refined = robust_circle(outline[:, 0], outline[:, 1], centre_x, centre_y, radius, CRESCENT_TOLERANCE,
+                            geometric=True)
+    if refined is not None:
+        centre_x, centre_y, radius = refined[:3]
+    # (outline pixels are the mask's outermost, half a pixel inside its edge)
+    return Candidate(float(centre_x), float(centre_y), float(radius) + 0.5)
