@@ -21,8 +21,8 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import (SURE_SIZE, CandidateMetrics, MaskMetrics, colour_stats, judge,
-                                                measure_mask)
+from balltrack.services.detector.checks import (NO_COLOUR, SURE_SIZE, CandidateMetrics, MaskMetrics,
+                                                colour_stats, judge, measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.fit import robust_circle
 from balltrack.services.detector.geometry import Candidate, box_around, disc
@@ -44,6 +44,8 @@ CRESCENT_POINTS = 10
 CRESCENT_TOLERANCE = ((0.1, 1.5), (0.05, 1.0))
 CRESCENT_SPAN = math.radians(120)
 CRESCENT_COVER = 0.5
+# The middle of the disc (this share of its radius) must be the highlight.
+CRESCENT_MIDDLE = 0.3
 
 
 def needs_highlight(metrics: CandidateMetrics, config: DetectorConfig) -> bool:
@@ -101,12 +103,18 @@ def crescent_candidates(contour: np.ndarray, mask: np.ndarray, planes: ColourPla
     """The circle of a crescent blob's outer arc (see crescent_circle), measured on ``mask``
     (with its highlight when that makes it pass); [] when the blob is no crescent."""
     circle = crescent_circle(contour, small_radius, max_radius)
-    if circle is None:
+    if circle is None or not pale_middle(circle, contour, planes, config):
         return []
     on_mask = measure_mask(circle, mask)
     if on_mask is None:
         return []
-    metrics = CandidateMetrics(on_mask, colour_stats(circle, planes), size=circle.radius / small_radius)
+    size = circle.radius / small_radius
+    # (a crescent fails on its fill unless its highlight is joined: when that cannot save it,
+    # its colour need not be measured)
+    if on_mask.fill < config.min_fill_ratio and not needs_highlight(CandidateMetrics(on_mask, NO_COLOUR, size),
+                                                                    config):
+        return []
+    metrics = CandidateMetrics(on_mask, colour_stats(circle, planes), size=size)
     if needs_highlight(metrics, config) and judge(metrics, config) is None:
         joined = highlight_metrics(circle, mask, planes, config)
         if joined is not None:
@@ -114,6 +122,21 @@ def crescent_candidates(contour: np.ndarray, mask: np.ndarray, planes: ColourPla
             if judge(highlighted, config) is not None:
                 metrics = highlighted
     return [(circle, metrics)]
+
+
+def pale_middle(circle: Candidate, contour: np.ndarray, planes: ColourPlanes, config: DetectorConfig) -> bool:
+    """Whether the middle of a crescent's circle (within CRESCENT_MIDDLE of its radius) is its
+    highlight: mostly pale pixels at least as bright as the crescent's colour. (Else the joined
+    highlight cannot fill the disc: a cheap look before measuring it.)"""
+    height, width = planes.mask.shape
+    middle = box_around(circle.x, circle.y, CRESCENT_MIDDLE * circle.radius, width, height)
+    if middle is None:
+        return False
+    left, top, blob_width, blob_height = cv2.boundingRect(contour)
+    blob = (slice(top, top + blob_height), slice(left, left + blob_width))
+    brightness = cv2.mean(np.max(planes.frame[blob], axis=2), cv2.inRange(planes.mask[blob], 255, 255))[0]
+    pale = pale_pixels(planes.frame[middle], config, math.ceil(brightness))
+    return np.count_nonzero(pale) >= 0.5 * pale.size
 
 
 def crescent_circle(contour: np.ndarray, small_radius: float, max_radius: float) -> Candidate | None:
