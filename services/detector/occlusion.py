@@ -76,18 +76,21 @@ def hidden_side_metrics(candidate: Candidate, mask: np.ndarray) -> MaskMetrics |
     x, y, radius = candidate.x, candidate.y, candidate.radius
     # (everything measure_mask reads: rim samples, the outer ring, the edge rays to 1.5 r)
     box = box_around(x, y, 1.6 * radius + 4, width, height)
-    if box is None:
+    # (the mask's edge inside the disc, found in a box just around it: a pixel more each way
+    # where the frame has one, so that its erosion is the whole mask's)
+    inner = box_around(x, y, INNER_SHARE * radius + 2, width, height)
+    if box is None or inner is None:
         return None
     left, top = box[1].start, box[0].start
-    patch = mask[box]
     centre_x, centre_y = x - left, y - top
-    colour = cv2.inRange(patch, 255, 255)
-    edge = cv2.subtract(colour, cv2.erode(colour, _KERNEL))
-    edge &= disc(patch.shape, centre_x, centre_y, INNER_SHARE * radius)
+    part = cv2.inRange(mask[inner], 255, 255)
+    edge = cv2.subtract(part, cv2.erode(part, _KERNEL))
+    edge &= disc(part.shape, x - inner[1].start, y - inner[0].start, INNER_SHARE * radius)
     points = cv2.findNonZero(edge)
     if points is None or len(points) < CHORD_SHARE * radius:
         return None
-    points = points.reshape(-1, 2).astype(np.float32)
+    # (in the coordinates of the measuring box)
+    points = (points.reshape(-1, 2) + (inner[1].start - left, inner[0].start - top)).astype(np.float32)
     tolerance = max(LINE_TOLERANCE[0], LINE_TOLERANCE[1] * radius)
     line = straightest_line(points, tolerance)
     if line is None:
@@ -106,6 +109,8 @@ def hidden_side_metrics(candidate: Candidate, mask: np.ndarray) -> MaskMetrics |
     if covered < CHORD_COVER * 2 * half_chord:
         return None
     # The hidden side: the one with (next to) no colour in the disc.
+    patch = mask[box]
+    colour = cv2.inRange(patch, 255, 255)
     rows, columns = np.mgrid[0:patch.shape[0], 0:patch.shape[1]]
     signed = columns * normal_x + rows * normal_y - offset
     inside = disc(patch.shape, centre_x, centre_y, radius) > 0
