@@ -34,10 +34,14 @@ CORNER_RUNS = 3
 # SURE_SIZE times small_radius for the evenness to mean something) needs only its colour in
 # the hue range, not hue_margin inside it: a ball under a warm lamp is yellower than felt in
 # daylight. It needs only SURE_COLOURFULNESS of min_colourfulness too: a ball in dim light
-# beside a lamp or a lit screen is dull next to the frame's bright level.
+# beside a lamp or a lit screen is dull next to the frame's bright level. Or it may be vivid
+# only next to its own lit side (see ColourMetrics.lit_colourfulness).
 SURE_SPREAD = 0.05
 SURE_SIZE = 2.0
 SURE_COLOURFULNESS = 0.75
+# A ball's own lit side: this share of its colour pixels are at most that bright (V, the
+# brightest channel); the brightest few are glints and specular spots, not lit felt.
+LIT_SIDE_SHARE = 0.9
 # Samples along each ray when measuring how round a blob's edge is.
 EDGE_STEPS = 25
 
@@ -85,9 +89,17 @@ class ColourMetrics:
     mean_hue: float       # OpenCV hue (0-180) of the mean colour of the whole disc; -1: grey
     mean_chroma: float    # chroma (raw units, max - min channel) of that mean colour
     colour_hue: float     # hue of the mean colour of its mask pixels only; -1: grey
+    # The same mean chroma over the disc's own lit side (its mask pixels' LIT_SIDE_SHARE
+    # brightness level) where that is below the frame's reference level (measured when read).
+    # A ball in shade beside a brightly lit area (a white wall, a window) is dull next to the
+    # frame's bright level, but its felt is as vivid as ever next to the light that reaches it,
+    # which its lit side shows. Leaves in shade are vivid by this measure too: it serves only
+    # a candidate whose shape alone makes it plainly a ball (see judge).
+    lit_colourfulness: float = MeasuredOnFirstRead()  # type: ignore[assignment]
 
 
-NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0, colour_hue=-1.0)
+NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0, colour_hue=-1.0,
+                          lit_colourfulness=0.0)
 
 
 @dataclass(frozen=True)
@@ -99,6 +111,7 @@ class CandidateMetrics:
     size: float               # radius over small_radius: below 1, a small ball
     dark_side: bool = False   # accepted by the dark-side second look (dark.py)
     highlighted: bool = False  # measured with its washed-out highlight (highlight.py)
+    partly_hidden: bool = False  # measured on its part in view (occlusion.py)
 
     @property
     def clean(self) -> bool:
@@ -258,10 +271,25 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
     # dark frame (a dim orange box can round to yellow pixel by pixel). Grey floor or
     # black shade inside the disc does not move the hue of the mean.
     mean_bgr = cv2.mean(planes.frame[box], inside)[:3]
-    return ColourMetrics(colourfulness=cv2.mean(planes.chroma[box], selected)[0] / planes.reference,
+    chroma = cv2.mean(planes.chroma[box], selected)[0]
+    patch = planes.frame[box]
+
+    def lit_colourfulness() -> float:
+        return chroma / min(planes.reference, lit_level(patch, selected))
+
+    return ColourMetrics(colourfulness=chroma / planes.reference,
                          mean_hue=mean_hue(mean_bgr),
                          mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain,
-                         colour_hue=mean_hue(cv2.mean(planes.frame[box], selected)[:3]))
+                         colour_hue=mean_hue(cv2.mean(patch, selected)[:3]),
+                         lit_colourfulness=lit_colourfulness)
+
+
+def lit_level(patch_bgr: np.ndarray, selected: np.ndarray) -> float:
+    """The brightness (V, 0-255) of the lit side of the ``selected`` pixels of a BGR patch:
+    LIT_SIDE_SHARE of them are at most this bright; at least 1."""
+    value = np.max(patch_bgr[selected > 0], axis=1)
+    rank = int(LIT_SIDE_SHARE * (value.size - 1))
+    return max(1.0, float(np.partition(value, rank)[rank]))
 
 
 def hue_in_range(hue: float, config: DetectorConfig, margin: float = -0.5) -> bool:
@@ -285,6 +313,8 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     # (size before spread: the spread is measured only when read, see MaskMetrics)
     sure_by_shape = metrics.clean and metrics.size >= SURE_SIZE and on_mask.spread <= SURE_SPREAD
     colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
+    vivid = (colour.colourfulness >= colourfulness_floor
+             or (sure_by_shape and colour.lit_colourfulness >= config.min_colourfulness))
     # A circle cut by the frame edge must still show as much rim as a whole ball of
     # small_radius has: a few pixels of arc at the border prove nothing. A ball smaller
     # than that must be whole, and have its outline found (see BallDetector._outlines).
@@ -292,7 +322,7 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
             or on_mask.fill < config.min_fill_ratio
             or on_mask.support < config.min_edge_support + clutter
             or on_mask.outside > config.max_outside_ratio
-            or colour.colourfulness < colourfulness_floor):
+            or not vivid):
         return None
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
         return None

@@ -17,7 +17,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, measure_mask, rim_points
+from balltrack.services.detector.checks import CandidateMetrics, hue_in_range, measure_mask, rim_points
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc
 from balltrack.services.detector.mask import EXPLAINED
@@ -131,7 +131,12 @@ def second_look(rejected: list[tuple[Candidate, CandidateMetrics]], kept: list[C
     for candidate, metrics in sorted(rejected, key=lambda item: item[0].radius, reverse=True):
         if attempts >= DARK_SIDE_ATTEMPTS or len(kept) >= config.max_detections:
             break
+        # (the colour judged as checks.judge does: vivid, and its hue hue_margin inside the
+        # range; a lit cap is no plain ball by shape, and wood, skin, lamps and orange light
+        # beside something dark sit at the range's orange end)
         if (metrics.colour.colourfulness < config.min_colourfulness
+                or (config.hue_margin > 0
+                    and not hue_in_range(metrics.colour.colour_hue, config, config.hue_margin - 0.5))
                 or any(circle_overlap(candidate, other) >= 0.3 for other in kept)):
             continue
         # (a cheap look first: is there anything dark around the colour at all?)

@@ -15,14 +15,16 @@ module of this package:
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
    the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
    that fails again with the pale, bright pixels around it joined to the mask (a washed-out
-   highlight that leaves only a crescent of colour).
+   highlight that leaves only a crescent of colour, whose outer arc's circle it proposes);
+   ``occlusion.py`` one whose mask ends along a straight edge across its disc with the part
+   past that edge hidden (a ball behind a wall).
 7. Here: accepted balls are erased from the mask and their neighbours judged again (a ball
    touching a found one, a two-colour ball); what they leave of their blobs is searched as
    any blob is (the rest of a heap). Overlapping circles are suppressed; largest first.
 8. ``outline.py``: each accepted ball's circle is replaced by its outline located on the frame
    itself, to a fraction of a pixel. Balls smaller than ``small_radius`` are kept only when
    their outline is found; the others keep the mask's circle when it is not (clutter all
-   round, too little of the rim in view).
+   round, too little of the rim in view), and partly hidden balls keep it always.
 9. ``dark.py``: a few rejected candidates with something dark around them get a second look
    for a ball whose unlit side is black.
 
@@ -55,8 +57,9 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
-from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
+from balltrack.services.detector.highlight import crescent_candidates, highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.occlusion import measured_in_view
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
                                                    blob_proposals, fill_holes, frame_search, hough_proposals,
@@ -161,6 +164,8 @@ class BallDetector:
             return found  # one isolated round blob: nothing for Hough to split
         proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
         in_blob = self._measure_proposals(proposals, search, mask)
+        in_blob.extend(crescent_candidates(contour, mask, search.planes, search.small_radius,
+                                           search.max_radius, self.config))
         blob, left, top = blob_image(contour, mask)
         arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
         in_blob.extend(self._arc_candidates(arcs, search, mask))
@@ -213,6 +218,7 @@ class BallDetector:
                     highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
                     if judge(highlighted, self.config) is not None:
                         metrics = highlighted
+            metrics = measured_in_view(candidate, metrics, mask, self.config)
             results.append((candidate, metrics))
         return results
 
@@ -319,6 +325,7 @@ class BallDetector:
                                              for other in accepted + newly):
                     candidate.score = score
                     candidate.needs_outline = metrics.size < 1.0
+                    candidate.partly_hidden = metrics.partly_hidden
                     newly.append(candidate)
                 else:
                     still.append((candidate, metrics))
@@ -337,7 +344,7 @@ class BallDetector:
                     if remeasured is None:
                         continue
                     # (on the colour mask alone: a highlight joined to it is measured once)
-                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False)
+                    metrics = dataclasses.replace(metrics, mask=remeasured, highlighted=False, partly_hidden=False)
                 pending.append((candidate, metrics))
             pending.extend(self._leftover_candidates(newly, explained, search))
             pending.sort(key=acceptance_order, reverse=True)
@@ -356,8 +363,9 @@ class BallDetector:
         reach = DARK_WIDE_REACH if planes.dark else WIDE_REACH
         kept: list[Candidate] = []
         for ball in accepted:
-            outline = silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
-                                 [other for other in accepted if other is not ball], reach)
+            outline = None if ball.partly_hidden else silhouette(
+                planes.frame, planes.mask, planes.gain, planes.reference, ball,
+                [other for other in accepted if other is not ball], reach)
             if outline is not None:
                 ball.x, ball.y, ball.radius = outline
             elif ball.needs_outline:

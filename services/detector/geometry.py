@@ -26,6 +26,8 @@ class Candidate:
     # A small candidate is kept only if its outline is found on the frame (see
     # BallDetector._outlines).
     needs_outline: bool = False
+    # Partly hidden behind something straight: its outline is not looked for (see occlusion.py).
+    partly_hidden: bool = False
 
 
 @functools.lru_cache(maxsize=128)

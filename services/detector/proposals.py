@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from balltrack.services.detector.checks import lit_level
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import ColourPlanes
@@ -39,6 +40,9 @@ CLUSTER_BALLS = 8
 CLUSTER_SMALLEST = 0.5
 CLUSTER_COVER = 0.85
 CLUSTER_ERASE = 1.2
+# A blob judged next to its own lit side covers at least this share of its enclosing circle:
+# a ball's disc with a ragged edge or a notch of shade does.
+LIT_ROUND_BLOB = 0.75
 
 
 @dataclass
@@ -160,11 +164,19 @@ def blob_proposals(contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
     # the blob may hold more than a ball.
     box = (slice(top, top + blob_height), slice(left, left + blob_width))
     planes = search.planes
-    blob_chroma = cv2.mean(planes.chroma[box], cv2.inRange(mask[box], 255, 255))[0]
-    if blob_chroma < 0.7 * config.min_colourfulness * planes.reference:
-        return None
+    colour = cv2.inRange(mask[box], 255, 255)
+    blob_chroma = cv2.mean(planes.chroma[box], colour)[0]
+    floor = 0.7 * config.min_colourfulness
     (x, y), radius = cv2.minEnclosingCircle(contour)
-    if area < 0.3 * math.pi * radius * radius:
+    if blob_chroma < floor * planes.reference:
+        # A ball in shade may be vivid only next to its own lit side (see
+        # checks.ColourMetrics.lit_colourfulness), which makes a ball only of a candidate
+        # plainly one by its shape: a round blob by itself (LIT_ROUND_BLOB), its enclosing
+        # circle the one proposal, nothing for Hough to split.
+        if (area < LIT_ROUND_BLOB * math.pi * radius * radius
+                or blob_chroma < floor * lit_level(planes.frame[box], colour)):
+            return None
+    elif area < 0.3 * math.pi * radius * radius:
         return []
     return [Candidate(float(x), float(y), float(radius))]
 

@@ -17,7 +17,8 @@ from tests.unit.detector.drawing import TENNIS_BGR, scene
 
 SHAPE = (240, 320)
 GOOD_MASK = MaskMetrics(visible=1.0, support=0.95, leak=0.02, fill=0.97, outside=0.01, spread=0.02)
-GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0, colour_hue=36.0)
+GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0, colour_hue=36.0,
+                            lit_colourfulness=0.6)
 
 
 def test_a_clean_disc_measures_as_a_ball():
@@ -121,7 +122,7 @@ def test_judge_scores_a_ball():
     ({"fill": 0.5}, {}, 3.0),                          # a ring, not a disc
     ({"support": 0.45, "leak": 0.1}, {}, 3.0),        # clutter asks for more rim support
     ({"outside": 0.35}, {}, 3.0),                      # in a large area of colour
-    ({}, {"colourfulness": 0.2}, 3.0),                 # dull
+    ({}, {"colourfulness": 0.2, "lit_colourfulness": 0.2}, 3.0),  # dull
     ({}, {"mean_chroma": 3.0, "mean_hue": 15.0}, 3.0),  # dim, and the mean colour is orange
     ({"spread": 0.06}, {"colour_hue": 26.0}, 3.0),     # its colour at the orange end (wood, skin)
     ({"spread": 0.06}, {"colour_hue": 48.5}, 3.0),     # or at the green end (leaves)
@@ -160,10 +161,37 @@ def test_judge_accepts_what_the_rejections_border_on():
     dull = dataclasses.replace(GOOD_COLOUR, colourfulness=0.8 * config.min_colourfulness)
     assert judge(CandidateMetrics(GOOD_MASK, dull, size=3.0), config) is not None
     assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), dull, size=3.0), config) is None
-    assert judge(CandidateMetrics(GOOD_MASK, dataclasses.replace(dull, colourfulness=0.2), size=3.0),
-                 config) is None
+    duller = dataclasses.replace(dull, colourfulness=0.2, lit_colourfulness=0.2)
+    assert judge(CandidateMetrics(GOOD_MASK, duller, size=3.0), config) is None
     # a whole small ball
     assert judge(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=0.8), config) is not None
+
+
+def test_a_ball_plainly_round_may_be_vivid_next_to_its_own_lit_side():
+    config = DetectorConfig()
+    # in shade beside a white wall: dull next to the frame's bright level, not next to its own
+    shaded = dataclasses.replace(GOOD_COLOUR, colourfulness=0.15, lit_colourfulness=0.4)
+    assert judge(CandidateMetrics(GOOD_MASK, shaded, size=3.0), config) is not None
+    # leaves in shade are as vivid next to their own light: a ragged edge or a small blob is no
+    # plain ball
+    assert judge(CandidateMetrics(dataclasses.replace(GOOD_MASK, spread=0.07), shaded, size=3.0),
+                 config) is None
+    assert judge(CandidateMetrics(GOOD_MASK, shaded, size=1.5), config) is None
+    # pale (dull next to its own lit side too)
+    pale = dataclasses.replace(shaded, lit_colourfulness=0.2)
+    assert judge(CandidateMetrics(GOOD_MASK, pale, size=3.0), config) is None
+
+
+def test_lit_colourfulness_is_measured_next_to_the_balls_own_lit_side():
+    image = scene([(160.0, 120.0, 25.0)], width=320, height=240)
+    planes = ColourMasker(DetectorConfig()).planes(image)
+    bright = colour_stats(Candidate(160.0, 120.0, 25.0), planes)
+    # the ball is the frame's brightest thing: the reference level is its own lit side's
+    assert bright.lit_colourfulness == pytest.approx(bright.colourfulness)
+    # beside a white wall four times as bright: dull next to it, vivid next to its own lit side
+    dim = colour_stats(Candidate(160.0, 120.0, 25.0), dataclasses.replace(planes, reference=4 * planes.reference))
+    assert dim.colourfulness == pytest.approx(bright.colourfulness / 4)
+    assert dim.colourfulness < DetectorConfig().min_colourfulness < dim.lit_colourfulness
 
 
 def test_evenly_spaced_is_linspace_to_the_bit():

@@ -18,7 +18,8 @@ U, V, RADIUS = 160.4, 120.7, 30.0
 # what the candidate checks make of a lit cap: a ragged rim (they reject it)
 CAP_METRICS = CandidateMetrics(
     MaskMetrics(visible=1.0, support=0.5, leak=0.1, fill=0.7, outside=0.05, spread=0.1),
-    ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=100.0, colour_hue=36.0), size=4.0)
+    ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=100.0, colour_hue=36.0, lit_colourfulness=0.6),
+    size=4.0)
 
 
 def black_side_frame(terminator: float = 0.0):
@@ -125,13 +126,16 @@ def test_colour_that_does_not_reach_the_outline_is_no_lit_rim():
     assert lit_rim_support(planes.frame, planes.mask, Candidate(U, V, RADIUS)) == 0.0
 
 
-def test_second_look_passes_over_dull_overlapping_and_surplus_candidates():
+def test_second_look_passes_over_dull_orange_overlapping_and_surplus_candidates():
     config = DetectorConfig()
     planes = ColourMasker(config).planes(black_side_frame())
     search = frame_search(planes, config, 1.0)
     cap = lit_cap(planes)
-    dull = CandidateMetrics(CAP_METRICS.mask, ColourMetrics(0.1, 36.0, 100.0, 36.0), size=4.0)
+    dull = CandidateMetrics(CAP_METRICS.mask, ColourMetrics(0.1, 36.0, 100.0, 36.0, 0.1), size=4.0)
     assert second_look([(cap, dull)], [], planes.mask, search, config, WIDE_REACH) == []
+    # its colour at the range's orange end (a yellow box with a black stripe, wood, a lamp)
+    orange = CandidateMetrics(CAP_METRICS.mask, ColourMetrics(0.6, 25.5, 100.0, 25.5, 0.6), size=4.0)
+    assert second_look([(cap, orange)], [], planes.mask, search, config, WIDE_REACH) == []
     already = Candidate(U, V, RADIUS, score=0.9)
     assert second_look([(cap, CAP_METRICS)], [already], planes.mask, search, config,
                        WIDE_REACH) == [already]

@@ -28,8 +28,8 @@ from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import EXPLAINED
 from balltrack.services.detector.proposals import fill_holes, frame_search
 from tests import harness
-from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_lit_from_above, floor,
-                                         pitch_dark_frame, scene, to_uint8)
+from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_box, draw_lit_from_above,
+                                         floor, pitch_dark_frame, scene, to_uint8)
 
 SHARED_DATA = Path(__file__).resolve().parents[4] / "shared/data"
 REAL_DEV_SET = SHARED_DATA / "real_tennis_dev"
@@ -91,6 +91,31 @@ def test_dark_floor_alone_gives_nothing(detector, brightness):
         noisy = np.clip(image.astype(np.int16) + noise, 0, 255).astype(np.uint8)
         assert detector.detect(image).detections == []
         assert detector.detect(noisy).detections == []
+
+
+def in_shade_beside_a_white_wall(shade, ball=None, box=None):
+    """A frame whose top is a white wall, with a ball (u, v, radius) or a box (x0, y0, x1, y1)
+    in even shade below it: felt colour at ``shade`` of its full brightness."""
+    image = draw_box(floor(), 0, 0, 640, 200, (245, 245, 245))
+    colour = tuple(shade * channel for channel in TENNIS_BGR)
+    if ball is not None:
+        image = draw_ball(image, *ball, colour=colour, shade_floor=0.8)
+    if box is not None:
+        image = draw_box(image, *box, colour)
+    return to_uint8(image)
+
+
+@pytest.mark.parametrize("shade", [0.25, 0.3, 0.45])
+def test_finds_a_ball_in_shade_beside_a_white_wall(detector, shade):
+    # dull next to the wall's brightness, but as vivid as ever next to its own lit side
+    result = detector.detect(in_shade_beside_a_white_wall(shade, ball=(320.0, 330.0, 40.0)))
+    assert len(result.detections) == 1, result.detections
+    assert_found(result.detections, 320.0, 330.0, 40.0)
+
+
+def test_shaded_things_of_ball_colour_that_are_no_plain_ball_give_nothing(detector):
+    for box in ((200, 280, 440, 340), (280, 260, 360, 340)):  # a strip, a square
+        assert detector.detect(in_shade_beside_a_white_wall(0.3, box=box)).detections == []
 
 
 def test_dark_distractors_give_nothing(detector):
@@ -472,9 +497,10 @@ def test_pitch_dark_distractors_give_nothing(detector):
 
 
 # Figures with the defaults when they were last changed (recall, false positives per image):
-# tennis_floor_dev 0.871, 0.12; tennis_indoor_dev 0.872, 0.17 (real_tennis_dev: see above).
+# tennis_floor_dev 0.878, 0.12; tennis_indoor_dev 0.907, 0.17 (real_tennis_dev: see above).
+# (Two of the indoor set's 15 false positives are unlabelled balls in shade, in 55.jpg and 108.jpg.)
 # A floor a little below them: no change may quietly lose what these photos measure.
-DEV_SET_FLOORS = {"tennis_floor_dev": (0.865, 0.14), "tennis_indoor_dev": (0.86, 0.18)}
+DEV_SET_FLOORS = {"tennis_floor_dev": (0.87, 0.14), "tennis_indoor_dev": (0.90, 0.18)}
 
 
 @pytest.mark.parametrize("name", sorted(DEV_SET_FLOORS))

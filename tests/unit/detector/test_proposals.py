@@ -18,15 +18,17 @@ from balltrack.services.detector.proposals import (CLUSTER_COVER, HOUGH_CIRCLES_
 SHAPE = (240, 320)
 
 
-def planes_of(mask, chroma_level=180):
-    """Colour planes of a drawn mask: vivid colour where the mask is, grey elsewhere."""
+def planes_of(mask, chroma_level=180, value=120):
+    """Colour planes of a drawn mask: colour of ``chroma_level`` and brightness ``value`` where
+    the mask is, grey elsewhere; the frame's reference level is 250."""
     chroma = np.where(mask == 255, chroma_level, 5).astype(np.uint8)
     frame = np.full(mask.shape + (3,), 120, np.uint8)
+    frame[mask == 255] = value
     return ColourPlanes(mask=mask, frame=frame, gain=1.0, chroma=chroma, reference=250.0)
 
 
-def search_of(mask, config=None, chroma_level=180):
-    return frame_search(planes_of(mask, chroma_level), config or DetectorConfig(), 1.0)
+def search_of(mask, config=None, chroma_level=180, value=120):
+    return frame_search(planes_of(mask, chroma_level, value), config or DetectorConfig(), 1.0)
 
 
 def test_fill_holes_one_contour_per_blob():
@@ -123,8 +125,24 @@ def test_blobs_that_cannot_hold_a_ball_are_dropped():
     assert blob_proposals(fill_holes(huge)[0][0], small_limit, huge, config) is None
     # a dull blob (leaves in shade): its mean chroma is below 0.7 min_colourfulness
     dull = disc(SHAPE, 100.0, 100.0, 20.0)
-    dull_search = search_of(dull, chroma_level=int(0.6 * config.min_colourfulness * 250))
+    # (as bright as the frame's reference level: dull next to its own lit side too)
+    dull_search = search_of(dull, chroma_level=int(0.6 * config.min_colourfulness * 250), value=250)
     assert blob_proposals(fill_holes(dull)[0][0], dull_search, dull, config) is None
+
+
+def test_a_round_blob_in_shade_is_judged_next_to_its_own_lit_side():
+    config = DetectorConfig()
+    chroma_level = int(0.6 * config.min_colourfulness * 250)  # dull next to the frame's level
+    # a ball in shade, at 0.4 of the frame's bright level: vivid next to its own
+    ball = disc(SHAPE, 100.0, 100.0, 20.0)
+    [proposal] = blob_proposals(fill_holes(ball)[0][0], search_of(ball, chroma_level=chroma_level, value=100),
+                                ball, config)
+    assert (proposal.x, proposal.y) == pytest.approx((100.0, 100.0), abs=1.0)
+    # shaded leaves, a strip of them: not one round blob, so dull as before
+    strip = np.zeros(SHAPE, np.uint8)
+    strip[90:110, 40:200] = 255
+    assert blob_proposals(fill_holes(strip)[0][0], search_of(strip, chroma_level=chroma_level, value=100),
+                          strip, config) is None
 
 
 def test_hough_splits_touching_balls():
