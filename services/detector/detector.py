@@ -57,6 +57,7 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.occlusion import front_balls
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
                                                    blob_proposals, fill_holes, frame_search, hough_proposals,
@@ -164,8 +165,8 @@ class BallDetector:
         blob, left, top = blob_image(contour, mask)
         arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
         in_blob.extend(self._arc_candidates(arcs, search, mask))
-        return (found + in_blob
-                + self._cluster_candidates(contour, search, mask, found + in_blob, arcs))
+        return (found + in_blob + self._cluster_candidates(contour, search, mask, found + in_blob, arcs)
+                + front_balls(cv2.boundingRect(contour), search, mask, CLUSTER_MIN_SIZE * search.small_radius))
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
                          mask: np.ndarray) -> list[Measured] | None:
