@@ -57,11 +57,11 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
-from balltrack.services.detector.occlusion import front_balls
+from balltrack.services.detector.occlusion import front_balls, may_overlap
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
                                                    blob_proposals, fill_holes, frame_search, hough_proposals,
-                                                   inscribed_discs, leftover_blobs)
+                                                   inscribed_discs, leftover_blobs, leftover_search)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
 # with no ambient: its dark side is found by the outline search, or it is dropped).
@@ -316,8 +316,7 @@ class BallDetector:
                 score = judge(metrics, config)
                 if self._debug is not None:
                     self._debug.append((candidate, metrics, score))
-                if score is not None and all(circle_overlap(candidate, other) < 0.3
-                                             for other in accepted + newly):
+                if score is not None and all(may_overlap(candidate, other) for other in accepted + newly):
                     candidate.score = score
                     candidate.needs_outline = metrics.size < 1.0
                     newly.append(candidate)
@@ -372,6 +371,7 @@ class BallDetector:
         """The candidates of the mask pieces left next to freshly accepted balls (see
         _contour_candidates), judged."""
         results: list[Measured] = []
+        search = leftover_search(search, explained)
         for contour in leftover_blobs(balls, explained):
             found = self._contour_candidates(contour, search, explained)
             for candidate, metrics in found:

@@ -26,6 +26,8 @@ class Candidate:
     # A small candidate is kept only if its outline is found on the frame (see
     # BallDetector._outlines).
     needs_outline: bool = False
+    # Found in front of another ball by its rim on the frame (see occlusion.py).
+    in_front: bool = False
 
 
 @functools.lru_cache(maxsize=128)

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.checks import CandidateMetrics, colour_stats, measure_mask
-from balltrack.services.detector.geometry import Candidate, box_around, disc, rim_directions
+from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc, rim_directions
 from balltrack.services.detector.proposals import FrameSearch
 
 # The front ball's rim is a brightness edge along this share of its length at least: a ball's
@@ -49,6 +49,13 @@ FRONT_SEARCH_AREA = 128 * 128
 # times the median gradient inside the circle (0.7 r), so that grass, gravel or a patterned
 # cloth, edges everywhere, makes no rim of its own.
 FRONT_CONTRAST = 2.0
+# Accepted balls overlap by less than OVERLAP (of the smaller one's disc): two circles sharing
+# more are two readings of one ball. A ball behind one in front of it is hidden as far as it
+# lies behind it, so next to a ball found in front it may be overlapped up to BEHIND_OVERLAP
+# (its centre about 0.8 radii from the front ball's; the rest of it is judged as a ball on
+# its own, with the front ball's disc explained).
+OVERLAP = 0.3
+BEHIND_OVERLAP = 0.5
 # Median first: the impulse noise of some cameras' JPEGs makes rings of gradient of its own.
 _MEDIAN_KERNEL = 3
 _BLUR_KERNEL = (5, 5)
@@ -86,7 +93,8 @@ def front_balls(box: tuple[int, int, int, int], search: FrameSearch, mask: np.nd
     step = EDGE_STEP * search.planes.reference
     found: list[tuple[Candidate, CandidateMetrics]] = []
     for cx, cy, radius in circles[0][:FRONT_CIRCLES]:
-        circle = Candidate(float(cx) / shrink + x0, float(cy) / shrink + y0, float(radius) / shrink)
+        circle = Candidate(float(cx) / shrink + x0, float(cy) / shrink + y0, float(radius) / shrink,
+                           in_front=True)
         face = inner_gradient(magnitude, circle.x - x0, circle.y - y0, 0.7 * circle.radius)
         edges = rim_edge_share(gradient_x, gradient_y, circle.x - x0, circle.y - y0, circle.radius,
                                max(step, FRONT_CONTRAST * face))
@@ -132,3 +140,9 @@ def inner_gradient(magnitude: np.ndarray, x: float, y: float, radius: float) -> 
     inside = disc(magnitude[box].shape, x - box[1].start, y - box[0].start, radius) > 0
     values = magnitude[box][inside]
     return float(np.median(values)) if values.size else 0.0
+
+
+def may_overlap(first: Candidate, second: Candidate) -> bool:
+    """Whether two circles may both be accepted balls, by how much they overlap (see OVERLAP)."""
+    limit = BEHIND_OVERLAP if first.in_front or second.in_front else OVERLAP
+    return circle_overlap(first, second) < limit

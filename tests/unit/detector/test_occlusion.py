@@ -8,7 +8,8 @@ import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
-from balltrack.services.detector.occlusion import front_balls, rim_edge_share
+from balltrack.services.detector.geometry import Candidate
+from balltrack.services.detector.occlusion import front_balls, may_overlap, rim_edge_share
 from balltrack.services.detector.proposals import fill_holes, frame_search
 from tests.unit.detector.drawing import TENNIS_BGR, coverage, draw_ball, floor, to_uint8
 
@@ -73,3 +74,22 @@ def test_the_detector_reports_the_front_ball_not_one_circle_round_the_pair():
     front = min(detections, key=lambda ball: math.hypot(ball.u - FRONT[0], ball.v - FRONT[1]))
     assert math.hypot(front.u - FRONT[0], front.v - FRONT[1]) < 2.0
     assert abs(front.radius_px - FRONT[2]) < 2.0
+
+
+def test_the_ball_behind_is_found_beside_the_front_one():
+    # it overlaps the front ball's circle by more than two separate balls may (0.3), as far
+    # as it is hidden behind it
+    frame = to_uint8(felt_ball(felt_ball(floor(), *BACK, colour=in_shadow(TENNIS_BGR)), *FRONT))
+    detections = BallDetector().detect(frame).detections
+    assert len(detections) == 2
+    for u, v, radius in (BACK, FRONT):
+        ball = min(detections, key=lambda found: math.hypot(found.u - u, found.v - v))
+        assert math.hypot(ball.u - u, ball.v - v) < 2.0
+        assert abs(ball.radius_px - radius) < 2.0
+
+
+def test_only_a_ball_in_front_may_hide_much_of_another():
+    first, second = Candidate(100.0, 100.0, 20.0), Candidate(100.0, 118.0, 20.0)  # overlap ~0.43
+    assert not may_overlap(first, second)
+    assert may_overlap(first, Candidate(100.0, 118.0, 20.0, in_front=True))
+    assert not may_overlap(first, Candidate(100.0, 105.0, 20.0, in_front=True))  # one ball twice
