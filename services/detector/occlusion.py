@@ -51,11 +51,12 @@ FRONT_SEARCH_AREA = 128 * 128
 FRONT_CONTRAST = 2.0
 # Accepted balls overlap by less than OVERLAP (of the smaller one's disc): two circles sharing
 # more are two readings of one ball. A ball behind one in front of it is hidden as far as it
-# lies behind it, so next to a ball found in front it may be overlapped up to BEHIND_OVERLAP
-# (its centre about 0.8 radii from the front ball's; the rest of it is judged as a ball on
-# its own, with the front ball's disc explained).
+# lies behind it, so next to a ball found in front it may be overlapped up to BEHIND_OVERLAP:
+# what shows of it is judged as a ball on its own (the front ball's disc explained), and a
+# ball hidden further shows a sliver no circle can be told from, while two readings of one
+# ball overlap nearly wholly.
 OVERLAP = 0.3
-BEHIND_OVERLAP = 0.5
+BEHIND_OVERLAP = 0.75
 # Median first: the impulse noise of some cameras' JPEGs makes rings of gradient of its own.
 _MEDIAN_KERNEL = 3
 _BLUR_KERNEL = (5, 5)

@@ -92,4 +92,5 @@ def test_only_a_ball_in_front_may_hide_much_of_another():
     first, second = Candidate(100.0, 100.0, 20.0), Candidate(100.0, 118.0, 20.0)  # overlap ~0.43
     assert not may_overlap(first, second)
     assert may_overlap(first, Candidate(100.0, 118.0, 20.0, in_front=True))
+    assert may_overlap(first, Candidate(100.0, 110.0, 20.0, in_front=True))  # ~0.68: mostly hidden
     assert not may_overlap(first, Candidate(100.0, 105.0, 20.0, in_front=True))  # one ball twice
