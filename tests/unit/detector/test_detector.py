@@ -474,7 +474,7 @@ def test_pitch_dark_distractors_give_nothing(detector):
 # Figures with the defaults when they were last changed (recall, false positives per image):
 # tennis_floor_dev 0.871, 0.12; tennis_indoor_dev 0.872, 0.17 (real_tennis_dev: see above).
 # A floor a little below them: no change may quietly lose what these photos measure.
-DEV_SET_FLOORS = {"tennis_floor_dev": (0.865, 0.14), "tennis_indoor_dev": (0.86, 0.18)}
+DEV_SET_FLOORS = {"tennis_floor_dev": (0.89, 0.14), "tennis_indoor_dev": (0.86, 0.18)}
 
 
 @pytest.mark.parametrize("name", sorted(DEV_SET_FLOORS))
