@@ -166,7 +166,7 @@ class BallDetector:
         arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
         in_blob.extend(self._arc_candidates(arcs, search, mask))
         return (found + in_blob + self._cluster_candidates(contour, search, mask, found + in_blob, arcs)
-                + front_balls(cv2.boundingRect(contour), search, mask, CLUSTER_MIN_SIZE * search.small_radius))
+                + front_balls(contour, search, mask, CLUSTER_MIN_SIZE * search.small_radius))
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
                          mask: np.ndarray) -> list[Measured] | None:

@@ -41,11 +41,11 @@ FRONT_CANNY = 60
 FRONT_ACCUMULATOR = 15
 FRONT_CIRCLES = 4
 # Hough's cost grows with the patch, its edges and its radius range: a blob larger than this
-# (px, at processing size) is searched shrunk to it, for balls that are still at least the
-# smallest searched radius there. A ball and the one behind it make a blob of about two balls,
-# whose balls stay large enough at this size; in a heap or a yellow-green area full detail
-# costs tens of milliseconds (128 x 128 made photos ~15 % slower at the median).
-FRONT_SEARCH_AREA = 64 * 64
+# (px, at processing size) is searched shrunk to it (and judged there), for balls of at least
+# the smallest searched radius at that size. A ball and the one behind it make a blob about two
+# balls long and one wide, whose balls keep about twice that radius at this size; full detail
+# in heaps and yellow-green areas made photos ~15 % slower at the median (at 128 x 128).
+FRONT_SEARCH_AREA = 48 * 48
 # A ball's face is smooth shading next to its outline: an edge counts only where it is this many
 # times the median gradient inside the circle (0.7 r), so that grass, gravel or a patterned
 # cloth, edges everywhere, makes no rim of its own.
@@ -63,12 +63,15 @@ _MEDIAN_KERNEL = 3
 _BLUR_KERNEL = (5, 5)
 
 
-def front_balls(box: tuple[int, int, int, int], search: FrameSearch, mask: np.ndarray,
+def front_balls(contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
                 smallest: float) -> list[tuple[Candidate, CandidateMetrics]]:
-    """Balls in front of others inside one blob's box (left, top, width, height) of ``mask``,
-    measured on it, none smaller than ``smallest`` (px); their metrics' ``front_edges`` is the
-    share of their rim that is a brightness edge on the frame."""
-    left, top, blob_width, blob_height = box
+    """Balls in front of others in one blob (its contour) of ``mask``, measured on it, none
+    smaller than ``smallest`` (px); their metrics' ``front_edges`` is the share of their rim
+    that is a brightness edge on the frame."""
+    # (a ball in front of another and the one behind it: room for two balls, each mostly seen)
+    if cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
+        return []
+    left, top, blob_width, blob_height = cv2.boundingRect(contour)
     largest = min(search.max_radius, 0.55 * min(blob_width, blob_height) + 2)
     if largest <= smallest:
         return []
@@ -76,32 +79,32 @@ def front_balls(box: tuple[int, int, int, int], search: FrameSearch, mask: np.nd
     pad = 4
     x0, y0 = max(0, left - pad), max(0, top - pad)
     x1, y1 = min(width, left + blob_width + pad), min(height, top + blob_height + pad)
-    grey = cv2.cvtColor(search.planes.frame[y0:y1, x0:x1], cv2.COLOR_BGR2GRAY)
-    grey = cv2.GaussianBlur(cv2.medianBlur(grey, _MEDIAN_KERNEL), _BLUR_KERNEL, 0)
-    shrink = min(1.0, math.sqrt(FRONT_SEARCH_AREA / float(grey.shape[0] * grey.shape[1])))
-    searched = grey if shrink == 1.0 else cv2.resize(grey, None, fx=shrink, fy=shrink,
-                                                       interpolation=cv2.INTER_AREA)
+    shrink = min(1.0, math.sqrt(FRONT_SEARCH_AREA / float((y1 - y0) * (x1 - x0))))
     # (a ball is told from clutter at ``smallest`` px and more: so too at the searched size)
     if largest * shrink <= smallest:
         return []
-    circles = cv2.HoughCircles(searched, cv2.HOUGH_GRADIENT, dp=1.0, minDist=max(2.0, smallest),
+    patch = search.planes.frame[y0:y1, x0:x1]
+    if shrink < 1.0:
+        patch = cv2.resize(patch, None, fx=shrink, fy=shrink, interpolation=cv2.INTER_AREA)
+    grey = cv2.GaussianBlur(cv2.medianBlur(cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY), _MEDIAN_KERNEL),
+                            _BLUR_KERNEL, 0)
+    circles = cv2.HoughCircles(grey, cv2.HOUGH_GRADIENT, dp=1.0, minDist=max(2.0, smallest),
                                param1=FRONT_CANNY, param2=FRONT_ACCUMULATOR,
                                minRadius=int(math.ceil(smallest)), maxRadius=int(math.ceil(largest * shrink)))
     if circles is None:
         return []
-    # (Sobel's 3x3 kernel weighs a one-pixel step 8 times)
+    # (Sobel's 3x3 kernel weighs a one-pixel step 8 times; an edge is steeper in a shrunk patch)
     levels = grey.astype(np.float32) / 8.0
     gradient_x = cv2.Sobel(levels, cv2.CV_32F, 1, 0)
     gradient_y = cv2.Sobel(levels, cv2.CV_32F, 0, 1)
     magnitude = cv2.magnitude(gradient_x, gradient_y)
-    step = EDGE_STEP * search.planes.reference
+    step = EDGE_STEP * search.planes.reference / shrink
     found: list[tuple[Candidate, CandidateMetrics]] = []
     for cx, cy, radius in circles[0][:FRONT_CIRCLES]:
-        circle = Candidate(float(cx) / shrink + x0, float(cy) / shrink + y0, float(radius) / shrink,
-                           in_front=True)
-        face = inner_gradient(magnitude, circle.x - x0, circle.y - y0, 0.7 * circle.radius)
-        edges = rim_edge_share(gradient_x, gradient_y, circle.x - x0, circle.y - y0, circle.radius,
-                               max(step, FRONT_CONTRAST * face))
+        cx, cy, radius = float(cx), float(cy), float(radius)
+        face = inner_gradient(magnitude, cx, cy, 0.7 * radius)
+        edges = rim_edge_share(gradient_x, gradient_y, cx, cy, radius, max(step, FRONT_CONTRAST * face))
+        circle = Candidate(cx / shrink + x0, cy / shrink + y0, radius / shrink, in_front=True)
         if edges < FRONT_RIM_EDGES:
             continue
         on_mask = measure_mask(circle, mask)

@@ -42,7 +42,7 @@ def test_the_ball_in_front_of_another_is_found_by_its_rim_on_the_frame():
     # the front ball's rim shows against the ball behind it, which lies in its shadow
     frame = to_uint8(felt_ball(felt_ball(floor(), *BACK, colour=in_shadow(TENNIS_BGR)), *FRONT))
     search, mask, contour = blob_search(frame)
-    found = front_balls(cv2.boundingRect(contour), search, mask, 7.5)
+    found = front_balls(contour, search, mask, 7.5)
     assert found
     ball, metrics = max(found, key=lambda item: item[1].front_edges)
     assert math.hypot(ball.x - FRONT[0], ball.y - FRONT[1]) < 3.0
@@ -53,7 +53,7 @@ def test_the_ball_in_front_of_another_is_found_by_its_rim_on_the_frame():
 def test_a_blob_of_even_colour_holds_no_ball_in_front():
     frame = to_uint8(felt_ball(felt_ball(floor(), *BACK, shading=0.0), *FRONT, shading=0.0))
     search, mask, contour = blob_search(frame)
-    assert front_balls(cv2.boundingRect(contour), search, mask, 7.5) == []
+    assert front_balls(contour, search, mask, 7.5) == []
 
 
 def test_a_rim_is_an_edge_only_across_it():
