@@ -68,8 +68,9 @@ def front_balls(contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
     """Balls in front of others in one blob (its contour) of ``mask``, measured on it, none
     smaller than ``smallest`` (px); their metrics' ``front_edges`` is the share of their rim
     that is a brightness edge on the frame."""
-    # (a ball in front of another and the one behind it: room for two balls, each mostly seen)
-    if cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
+    # (a ball in front of another and the one behind it: room for two balls, each mostly seen;
+    # the frame inside a piece that found balls leave of a blob was searched with the blob)
+    if mask is not search.mask or cv2.contourArea(contour) < 2 * 0.8 * math.pi * smallest * smallest:
         return []
     left, top, blob_width, blob_height = cv2.boundingRect(contour)
     largest = min(search.max_radius, 0.55 * min(blob_width, blob_height) + 2)
@@ -102,11 +103,14 @@ def front_balls(contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
     found: list[tuple[Candidate, CandidateMetrics]] = []
     for cx, cy, radius in circles[0][:FRONT_CIRCLES]:
         cx, cy, radius = float(cx), float(cy), float(radius)
+        # (the plain step first: most circles fail it, and the face's median costs more)
+        if rim_edge_share(gradient_x, gradient_y, cx, cy, radius, step) < FRONT_RIM_EDGES:
+            continue
         face = inner_gradient(magnitude, cx, cy, 0.7 * radius)
         edges = rim_edge_share(gradient_x, gradient_y, cx, cy, radius, max(step, FRONT_CONTRAST * face))
-        circle = Candidate(cx / shrink + x0, cy / shrink + y0, radius / shrink, in_front=True)
         if edges < FRONT_RIM_EDGES:
             continue
+        circle = Candidate(cx / shrink + x0, cy / shrink + y0, radius / shrink, in_front=True)
         on_mask = measure_mask(circle, mask)
         if on_mask is None or on_mask.fill < FRONT_FILL or on_mask.support < FRONT_MASK_SUPPORT:
             continue
