@@ -9,7 +9,8 @@ module of this package:
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
    a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
    of the long round pieces of its outline between concave points or across its waist (a
-   ball partly hidden behind another).
+   ball partly hidden behind another); ``occlusion.py``: circles on the frame's brightness
+   whose rim is an edge all round (a ball in front of another, in a blob with no waist).
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
