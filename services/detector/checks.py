@@ -112,6 +112,9 @@ class CandidateMetrics:
     dark_side: bool = False   # accepted by the dark-side second look (dark.py)
     highlighted: bool = False  # measured with its washed-out highlight (highlight.py)
     partly_hidden: bool = False  # measured on its part in view (occlusion.py)
+    # share of its rim that is a brightness edge on the frame, for a ball in front of another
+    # (front.py); 0 for every other candidate
+    front_edges: float = 0.0
 
     @property
     def clean(self) -> bool:
@@ -310,6 +313,11 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     """
     on_mask, colour = metrics.mask, metrics.colour
     clutter = on_mask.leak + on_mask.outside
+    support, outside = on_mask.support, on_mask.outside
+    if metrics.front_edges:
+        # A ball in front of another (front.py): the colour going on past its rim is the
+        # ball behind it, and its rim is an edge on the frame instead of the mask.
+        clutter, support, outside = 0.0, metrics.front_edges, 0.0
     # (size before spread: the spread is measured only when read, see MaskMetrics)
     sure_by_shape = metrics.clean and metrics.size >= SURE_SIZE and on_mask.spread <= SURE_SPREAD
     colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
@@ -320,8 +328,8 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     # than that must be whole, and have its outline found (see BallDetector._outlines).
     if (on_mask.visible < max(config.min_visible_fraction, min(1.0, 1.0 / metrics.size))
             or on_mask.fill < config.min_fill_ratio
-            or on_mask.support < config.min_edge_support + clutter
-            or on_mask.outside > config.max_outside_ratio
+            or support < config.min_edge_support + clutter
+            or outside > config.max_outside_ratio
             or not vivid):
         return None
     if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
@@ -336,10 +344,12 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     # (Not with a joined highlight: glints of bright ground poke out of it too, and white
     # areas around a candidate already fail its leak and outside checks.)
     # (leak before spread: the spread is measured only when read)
-    if (not metrics.highlighted and on_mask.leak > CORNER_LEAK and on_mask.leak_runs >= CORNER_RUNS
+    # (Nor for a ball in front of another: the ball behind leaks past its rim, and the frame's
+    # edge already follows its circle all round, which a box's corners do not.)
+    if (not metrics.highlighted and not metrics.front_edges and on_mask.leak > CORNER_LEAK and on_mask.leak_runs >= CORNER_RUNS
             and on_mask.spread > CORNER_SPREAD):
         return None
-    score = (on_mask.fill + on_mask.support - clutter) / 2.0
+    score = (on_mask.fill + support - clutter) / 2.0
     score = max(0.0, min(1.0, score))
     if score < config.min_score:
         return None

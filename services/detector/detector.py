@@ -9,7 +9,8 @@ module of this package:
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
    a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
    of the long round pieces of its outline between concave points or across its waist (a
-   ball partly hidden behind another).
+   ball partly hidden behind another); ``front.py``: circles on the frame's brightness
+   whose rim is an edge all round (a ball in front of another, in a blob with no waist).
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
    true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
@@ -59,11 +60,12 @@ from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.highlight import crescent_candidates, highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.front import front_balls, may_overlap
 from balltrack.services.detector.occlusion import measured_in_view
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import (CLUSTER_COVER, FrameSearch, blob_cover, blob_image,
                                                    blob_proposals, fill_holes, frame_search, hough_proposals,
-                                                   inscribed_discs, leftover_blobs)
+                                                   inscribed_discs, leftover_blobs, leftover_search)
 
 # A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
 # with no ambient: its dark side is found by the outline search, or it is dropped).
@@ -169,8 +171,8 @@ class BallDetector:
         blob, left, top = blob_image(contour, mask)
         arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
         in_blob.extend(self._arc_candidates(arcs, search, mask))
-        return (found + in_blob
-                + self._cluster_candidates(contour, search, mask, found + in_blob, arcs))
+        return (found + in_blob + self._cluster_candidates(contour, search, mask, found + in_blob, arcs)
+                + front_balls(contour, search, mask, CLUSTER_MIN_SIZE * search.small_radius))
 
     def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
                          mask: np.ndarray) -> list[Measured] | None:
@@ -321,8 +323,7 @@ class BallDetector:
                 score = judge(metrics, config)
                 if self._debug is not None:
                     self._debug.append((candidate, metrics, score))
-                if score is not None and all(circle_overlap(candidate, other) < 0.3
-                                             for other in accepted + newly):
+                if score is not None and all(may_overlap(candidate, other) for other in accepted + newly):
                     candidate.score = score
                     candidate.needs_outline = metrics.size < 1.0
                     candidate.partly_hidden = metrics.partly_hidden
@@ -379,6 +380,7 @@ class BallDetector:
         """The candidates of the mask pieces left next to freshly accepted balls (see
         _contour_candidates), judged."""
         results: list[Measured] = []
+        search = leftover_search(search, explained)
         for contour in leftover_blobs(balls, explained):
             found = self._contour_candidates(contour, search, explained)
             for candidate, metrics in found:

@@ -28,6 +28,8 @@ class Candidate:
     needs_outline: bool = False
     # Partly hidden behind something straight: its outline is not looked for (see occlusion.py).
     partly_hidden: bool = False
+    # Found in front of another ball by its rim on the frame (see front.py).
+    in_front: bool = False
 
 
 @functools.lru_cache(maxsize=128)

@@ -9,6 +9,7 @@ joined to other yellow-green things. Proposals are refined (``fit.py``) and chec
 (``checks.py``) by the detector.
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -18,7 +19,7 @@ import numpy as np
 from balltrack.services.detector.checks import lit_level
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate
-from balltrack.services.detector.mask import ColourPlanes
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 
 # Hough circles per mask blob: beyond the strongest few they are duplicates or clutter.
 HOUGH_CIRCLES_PER_BLOB = 4
@@ -304,3 +305,11 @@ def leftover_blobs(balls: list[Candidate], explained: np.ndarray) -> list[np.nda
             if nearest <= touching:
                 contours_found.append(contour)
     return contours_found
+
+
+def leftover_search(search: FrameSearch, explained: np.ndarray) -> FrameSearch:
+    """``search`` without the mask boundary pixels inside accepted balls' discs (EXPLAINED in
+    ``explained``): a found ball's outline is its own, and circles fitted to what it leaves of
+    its blob (a ball behind it, the rest of a heap) would otherwise be pulled onto it."""
+    keep = explained[search.boundary_y.astype(np.intp), search.boundary_x.astype(np.intp)] != EXPLAINED
+    return dataclasses.replace(search, boundary_x=search.boundary_x[keep], boundary_y=search.boundary_y[keep])

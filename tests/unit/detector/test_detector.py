@@ -497,10 +497,10 @@ def test_pitch_dark_distractors_give_nothing(detector):
 
 
 # Figures with the defaults when they were last changed (recall, false positives per image):
-# tennis_floor_dev 0.878, 0.12; tennis_indoor_dev 0.907, 0.17 (real_tennis_dev: see above).
+# tennis_floor_dev 0.905, 0.12; tennis_indoor_dev 0.907, 0.17 (real_tennis_dev: see above).
 # (Two of the indoor set's 15 false positives are unlabelled balls in shade, in 55.jpg and 108.jpg.)
 # A floor a little below them: no change may quietly lose what these photos measure.
-DEV_SET_FLOORS = {"tennis_floor_dev": (0.87, 0.14), "tennis_indoor_dev": (0.90, 0.18)}
+DEV_SET_FLOORS = {"tennis_floor_dev": (0.89, 0.14), "tennis_indoor_dev": (0.90, 0.18)}
 
 
 @pytest.mark.parametrize("name", sorted(DEV_SET_FLOORS))

@@ -13,7 +13,7 @@ from balltrack.services.detector.proposals import (CLUSTER_COVER, HOUGH_CIRCLES_
                                                    blob_proposals,
                                                    boundary_points, frame_search, hough_proposals,
                                                    blob_cover, fill_holes, inscribed_discs,
-                                                   leftover_blobs)
+                                                   leftover_blobs, leftover_search)
 
 SHAPE = (240, 320)
 
@@ -237,3 +237,15 @@ def test_a_strip_is_not_covered_by_its_inscribed_discs():
     discs = inscribed_discs(blob, search_of(strip), [])
     assert len(discs) >= 2
     assert blob_cover(blob, strip, discs) < CLUSTER_COVER
+
+
+def test_the_leftover_search_leaves_out_an_accepted_balls_outline():
+    mask = disc(SHAPE, 120.0, 120.0, 25.0) | disc(SHAPE, 160.0, 120.0, 15.0)
+    search = search_of(mask)
+    explained = mask.copy()
+    cv2.circle(explained, (120, 120), int(math.ceil(25.0 * 1.08 + 1)), EXPLAINED, -1)
+    left = leftover_search(search, explained)
+    assert 0 < left.boundary_x.size < search.boundary_x.size
+    # only the neighbour's outline is left, in row order
+    assert np.all(np.hypot(left.boundary_x - 160.0, left.boundary_y - 120.0) < 17.0)
+    assert np.all(np.diff(left.boundary_y) >= 0)
