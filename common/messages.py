@@ -264,9 +264,10 @@ SCHEMAS: dict[str, Check] = {
         "p50_ms": number(0.0), "p99_ms": number(0.0),
     }, {
         # Added by the simulator: simulated seconds per wall second over the last ~5 s, frames
-        # so far, mean render time, frames or ticks that lockstep gave up waiting for.
+        # so far, mean render time, frames or ticks that lockstep gave up waiting for, and the
+        # simulated time at which it took the last cmd_vel (the safety stop counts from there).
         "real_time_factor": number(0.0), "frames": integer(0), "render_ms": number(0.0),
-        "lockstep_timeouts": integer(0),
+        "lockstep_timeouts": integer(0), "command_time": number(),
     }),
     # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes,
     # {"describe": true} adds every parameter's declaration to the reply.

@@ -7,10 +7,11 @@ Subscribes: ``cmd_vel`` (Twist: linear[0] m/s, angular[2] rad/s, applied before 
 the safety stop zeroes it after ``cmd_timeout`` simulated seconds without one); for lockstep,
 ``detected_balls`` and the liveliness tokens ``alive/*``. Queries: ``camera/camera_info`` ->
 CameraInfo; ``sim/control``: SimCommand -> SimReply (client: services/simulator/control.py).
-Stats add ``real_time_factor``, ``render_ms``, ``lockstep_timeouts``, ``frames``; ``dropped``
-counts realtime schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``,
-``encoding``, ``jpeg_quality`` and ``publish_images`` (false: no more frames, as from a failed
-camera; the world, clock and ground truth go on) may be changed live through ``simulator/config``.
+Stats add ``real_time_factor``, ``render_ms``, ``lockstep_timeouts``, ``frames``,
+``command_time`` (when the last cmd_vel was taken, simulated s); ``dropped`` counts realtime
+schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``, ``encoding``,
+``jpeg_quality`` and ``publish_images`` (false: no more frames, as from a failed camera; the
+world, clock and ground truth go on) may be changed live through ``simulator/config``.
 
 Lockstep, per frame k: image_raw + ground_truth; wait for ``detected_balls`` seq k (if a
 detector is alive and the image was published); clock; if a follower is alive and its
@@ -145,7 +146,8 @@ def build(service: ServiceContext):
         sample.key_expr, sample.kind == zenoh.SampleKind.PUT), history=True)
     service.stats.extra = lambda: {
         "real_time_factor": meter.factor(), "frames": simulation.frame_index,
-        "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts}
+        "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts,
+        **({} if simulation.command_time is None else {"command_time": simulation.command_time})}
 
     def frame(config: SimulatorConfig, next_info: float) -> float:
         """Step, render, pace, publish one frame; returns when the next camera_info is due."""

@@ -248,6 +248,11 @@ class Simulation:
         return self._linear, self._angular
 
     @property
+    def command_time(self) -> float | None:
+        """Simulated time at which the last command was taken (None before the first)."""
+        return None if self._command_time == -math.inf else self._command_time
+
+    @property
     def safety_stopped(self) -> bool:
         """True while no command arrived within cmd_timeout (the robot is told to stop)."""
         return self._data.time - self._command_time > self.config.cmd_timeout

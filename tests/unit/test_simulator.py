@@ -108,7 +108,9 @@ def test_safety_stop_after_command_timeout(sim):
     sim.reset()
     timeout = sim.config.cmd_timeout
     start = sim.time
+    assert sim.command_time is None
     sim.set_command(0.4, 0.0, start)
+    assert sim.command_time == start
     # Still driving just before the timeout.
     while sim.time + sim.period < start + timeout - 1e-9:
         sim.step_frame()
