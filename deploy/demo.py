@@ -274,6 +274,10 @@ class Observer:
 # the rest for the recorder's ~5 ms a frame. Measured in the demo beside the recorder, under
 # load: frame -> detected_ball_3d p50 7.2-7.8 -> 6.2-6.4 ms, p99 15-21 -> 10-11 ms.
 RECORD_HOLD = 0.015
+# And yields a shared core to the pipeline: p99 frame -> detected_ball_3d 18.6/20.6/25.5 ms
+# with the recorder at nice 0, 14.5/14.8/21.2 ms at nice 10, three demos each, alternated
+# (p50 unchanged, 9.1-9.7 ms on 2026-11-25's slower machine).
+RECORD_NICE = 10
 
 
 def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -> Command | None:
@@ -283,7 +287,7 @@ def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -
     thread meaning to wake after 1 ms woke p99 3 ms, at worst 13 ms late beside the recording
     writer): in this process that would delay the arrivals the demo times."""
     arguments = ["record", "-o", str(run_dir / "run.mcap"), "--connect", endpoint,
-                 "--hold", str(RECORD_HOLD), *RECORDED_KEYS]
+                 "--hold", str(RECORD_HOLD), "--nice", str(RECORD_NICE), *RECORDED_KEYS]
     if args.namespace:
         arguments += ["--namespace", args.namespace]
     if args.secure:

@@ -10,6 +10,7 @@ then finishes its file (a file cut short by SIGKILL is still readable up to its 
 """
 
 import json
+import os
 import sys
 import threading
 import time
@@ -56,6 +57,10 @@ def command_record(args) -> int:
         return _fail(args, "--progress: must be >= 0 seconds", 2)
     if not 0 <= args.hold <= 10:
         return _fail(args, "--hold: must be 0 to 10 seconds", 2)
+    if not 0 <= args.nice <= 19:
+        return _fail(args, "--nice: must be 0 to 19", 2)
+    if args.nice:
+        os.nice(args.nice)  # before the session: threads take the priority of their creator
     stop = stop_on_signals()
     session = open_or_report(args)
     if session is None:
@@ -213,6 +218,9 @@ def register(commands) -> None:
                              "and writing it (0-10, default 0): on a small machine beside the "
                              "pipeline, 0.015 does the work after the pipeline has answered a "
                              "frame rather than beside it")
+    record.add_argument("--nice", type=int, default=0, metavar="N",
+                        help="lower the recorder's CPU priority by N (0-19, default 0), so that "
+                             "it yields a shared core to the pipeline")
     replay = networked(commands, "play", "publish a recording again", command_play)
     # No namespace given: the recorded keys as they were; --namespace NS moves them under NS.
     replay.set_defaults(namespace=None)

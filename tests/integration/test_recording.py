@@ -8,10 +8,12 @@ bad arguments: one line on stderr, exit 2.
 """
 
 import json
+import os
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import zenoh
 
@@ -127,8 +129,14 @@ def test_record_writes_what_was_published_and_info_counts_it(router, session, tm
 def test_held_messages_wait_and_are_all_written_at_stop(router, session, tmp_path):
     path = tmp_path / "held.mcap"
     recorder = Process([*BALLTRACK, "record", "-o", str(path), "--connect", router.endpoint,
-                        "--hold", "10", "--progress", "0.1", "detected_ball_3d"], tmp_path / "record.log")
+                        "--hold", "10", "--progress", "0.1", "--nice", "5", "detected_ball_3d"],
+                       tmp_path / "record.log")
     recorder.wait_for_output("recording", 30)
+    # --nice: every thread of the recorder, Zenoh's included, runs at least 5 below this test's
+    # priority (the writer thread lowers its own to 19).
+    threads = list((Path("/proc") / str(recorder.popen.pid) / "task").iterdir())
+    priorities = [os.getpriority(os.PRIO_PROCESS, int(thread.name)) for thread in threads]
+    assert len(threads) > 2 and min(priorities) == os.getpriority(os.PRIO_PROCESS, 0) + 5, priorities
     publisher = session.declare_publisher("detected_ball_3d", congestion_control=zenoh.CongestionControl.BLOCK)
     wait_matched(publisher)
     for seq in range(1, 11):
@@ -212,7 +220,8 @@ def test_bad_files_and_arguments_are_one_line_and_exit_2(router, tmp_path):
              ("play", str(garbage), "--rate", "fast"),
              ("record", "--connect", router.endpoint),  # no -o
              ("record", "-o", str(tmp_path / "x.mcap"), "--duration", "0"),
-             ("record", "-o", str(tmp_path / "x.mcap"), "--hold", "-0.1")]
+             ("record", "-o", str(tmp_path / "x.mcap"), "--hold", "-0.1"),
+             ("record", "-o", str(tmp_path / "x.mcap"), "--nice", "20")]
     for arguments in cases:
         result = balltrack(*arguments)
         assert result.returncode == 2, (arguments, result.stderr)
