@@ -1,6 +1,7 @@
 """The detector as a real process: drawn balls at known 3D positions in, balls out."""
 
 import math
+import time
 
 import pytest
 import zenoh
@@ -27,9 +28,20 @@ def detector(launch):
 
 
 def publish_and_wait(session, collector, payload, seq, timeout=20):
-    session.put("camera/image_raw", payload)
-    return collector.wait_for(
-        lambda messages: [m for m in messages if m["header"]["seq"] == seq], timeout, f"seq {seq}")[0]
+    """Put a frame and wait for the detector's answer to it. A frame of many fragments may be
+    dropped on its way on a loaded machine (CI: no answer to a 921 kB frame in 20 s; see
+    eclipse-zenoh/zenoh#1494), and the detector keeps only the newest frame by design: the same
+    frame is put again every 2 s until the answer comes or ``timeout`` passes."""
+    deadline = time.monotonic() + timeout
+    answered = lambda messages: [m for m in messages if m["header"]["seq"] == seq]  # noqa: E731
+    while True:
+        session.put("camera/image_raw", payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        try:
+            return collector.wait_for(answered, min(2.0, max(0.1, deadline - time.monotonic())),
+                                      f"seq {seq}")[0]
+        except AssertionError:
+            if time.monotonic() >= deadline:
+                raise
 
 
 @pytest.mark.parametrize("encoding", ["bgr8", "rgb8", "jpeg"])
