@@ -18,9 +18,12 @@ rerun replaces its entry) and rewrites ``DIR/report.md`` from the merged file.
 
 import json
 import math
+import os
+import platform
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -79,6 +82,31 @@ class Options:
         return quick if self.quick else full
 
 
+# The libraries whose versions a timing depends on, by distribution name.
+LIBRARIES = ("opencv-python-headless", "numpy", "mujoco", "eclipse-zenoh")
+
+
+def environment() -> dict[str, str]:
+    """Python's and the core libraries' versions, and the CPUs, as a report states them."""
+    found = {"python": platform.python_version()}
+    for library in LIBRARIES:
+        try:
+            found[library] = metadata.version(library)
+        except metadata.PackageNotFoundError:
+            found[library] = "not installed"
+    model = next((line.split(":", 1)[1].strip() for line in _read_lines("/proc/cpuinfo")
+                  if line.startswith("model name")), platform.machine())
+    found["cpus"] = f"{os.cpu_count()} x {model}"
+    return found
+
+
+def _read_lines(path: str) -> list[str]:
+    try:
+        return Path(path).read_text(errors="replace").splitlines()
+    except OSError:
+        return []
+
+
 @dataclass
 class Goal:
     name: str
@@ -108,6 +136,8 @@ class ExperimentResult:
     settings: dict[str, Any] = field(default_factory=dict)
     # Rows [what, the paper's figure, ours] for the report's "paper vs balltrack" table.
     paper: list[list[str]] = field(default_factory=list)
+    # What it ran on: timings in ms are the machine's and the libraries' as much as the code's.
+    environment: dict[str, str] = field(default_factory=lambda: environment())
 
     def compare(self, what: str, paper: str, ours: str) -> None:
         self.paper.append([what, paper, ours])
@@ -287,6 +317,9 @@ def render_report(merged: dict[str, Any]) -> str:
         if entry.get("settings"):
             settings = ", ".join(f"{key} = {value}" for key, value in entry["settings"].items())
             lines += [f"**Settings:** {settings}", ""]
+        if entry.get("environment"):
+            versions = ", ".join(f"{key} {value}" for key, value in entry["environment"].items())
+            lines += [f"**Environment:** {versions}", ""]
         for note in entry.get("notes", []):
             lines += [note, ""]
         for table in entry.get("tables", []):

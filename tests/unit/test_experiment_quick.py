@@ -5,6 +5,8 @@ tiny frame budget, so this takes a few seconds.
 """
 
 import json
+import os
+import platform
 
 import pytest
 
@@ -43,6 +45,11 @@ def test_illumination_writes_results_report_and_plots(tmp_path):
 
     report = (tmp_path / "report.md").read_text()
     assert "in-process" in report and "Table 1" in report and "~500 lx" in report
+    # What it ran on, since its timings are the machine's and the libraries' too.
+    from importlib import metadata
+    assert entry["environment"]["numpy"] == metadata.version("numpy")
+    assert entry["environment"]["cpus"].startswith(f"{os.cpu_count()} x ")
+    assert f"**Environment:** python {platform.python_version()}, opencv-python-headless " in report
     for plot in entry["plots"]:
         assert (tmp_path / plot).stat().st_size > 1000
         assert f"]({plot})" in report
