@@ -137,7 +137,7 @@ class ExperimentResult:
     # Rows [what, the paper's figure, ours] for the report's "paper vs balltrack" table.
     paper: list[list[str]] = field(default_factory=list)
     # What it ran on: timings in ms are the machine's and the libraries' as much as the code's.
-    environment: dict[str, str] = field(default_factory=lambda: environment())
+    environment: dict[str, str] = field(default_factory=environment)
 
     def compare(self, what: str, paper: str, ours: str) -> None:
         self.paper.append([what, paper, ours])
