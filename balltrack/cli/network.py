@@ -34,12 +34,33 @@ def command_router(args) -> int:
         print(f"balltrack router: cannot listen on {', '.join(map(str, listen)) or 'its endpoints'}: "
               f"{first_error_line(error)}", file=sys.stderr)
         return 1
-    print(f"router {session.zid()} listening on {', '.join(listen)}", flush=True)
+    # The endpoints as given, then where they are reached when that differs: the port the
+    # system chose for port 0, each interface's address for 0.0.0.0.
+    listening = ", ".join(listen)
+    locators = own_locators(session)
+    if locators and sorted(locators) != sorted(listen):
+        listening += f" (reached at {', '.join(locators)})"
+    print(f"router {session.zid()} listening on {listening}", flush=True)
     stop = stop_on_signals()
     while not stop.wait(0.5):
         pass
     session.close()
     return 0
+
+
+def own_locators(session, timeout: float = 2.0) -> list[str]:
+    """The endpoints a router session listens on, as its admin space reports them: a port 0
+    replaced by the port the system chose, an unspecified address (0.0.0.0) by each interface's.
+    Empty when its admin space is not readable (a configuration file without it)."""
+    import zenoh
+
+    try:
+        for reply in session.get(f"@/{session.zid()}/router", timeout=timeout):
+            if reply.ok is not None:
+                return [str(locator) for locator in json.loads(reply.ok.payload.to_bytes())["locators"]]
+    except (zenoh.ZError, ValueError, KeyError, TypeError):
+        pass
+    return []
 
 
 def _run_folder_status(args) -> int:

@@ -1,6 +1,7 @@
 """The balltrack command against a real router and services."""
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -9,7 +10,7 @@ import cv2
 import pytest
 
 from balltrack.common.messages import encode
-from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, draw_ball, floor_image,
+from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, client, draw_ball, floor_image,
                            process_environment, start_service)
 from tests.integration.test_pipeline import CAMERA_INFO
 
@@ -64,6 +65,25 @@ def test_unreadable_image_is_reported_not_fatal(tmp_path):
     assert result.returncode == 1
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     assert lines[0]["error"] and lines[1]["balls"] == []
+
+
+def test_router_on_port_zero_prints_the_port_it_listens_on(log_dir):
+    router = Process([sys.executable, "-m", "balltrack", "router", "--listen", "tcp/127.0.0.1:0"],
+                     log_dir / "router.log")
+    try:
+        router.wait_for_output("reached at", 20)
+        match = re.search(r"router (\w+) listening on tcp/127\.0\.0\.1:0 \(reached at tcp/127\.0\.0\.1:(\d+)\)",
+                          router.output())
+        assert match, router.output()
+        port = int(match.group(2))
+        assert port > 0
+        session = client(f"tcp/127.0.0.1:{port}")
+        try:
+            assert [str(zid) for zid in session.info.routers_zid()] == [match.group(1)]
+        finally:
+            session.close()
+    finally:
+        assert router.stop() == 0
 
 
 def test_no_router_is_a_clear_error():
