@@ -100,6 +100,58 @@ def environment() -> dict[str, str]:
     return found
 
 
+# Reference timings of the machine (see machine_speed): additions in a Python loop, and a 5x5
+# Gaussian blur of a 640x480 BGR frame on one OpenCV thread; each the best of several tries.
+SPEED_LOOP_ADDITIONS = 1_000_000
+SPEED_TRIES = 3
+SPEED_BLURS = 20
+
+
+def machine_speed() -> dict[str, float]:
+    """How fast this machine runs plain Python and OpenCV now, in ms (the best of several tries):
+    ``python_loop_ms`` (SPEED_LOOP_ADDITIONS additions in a ``for`` loop) and ``opencv_blur_ms``
+    (one blur, see SPEED_BLURS).
+
+    The same code's milliseconds change from machine to machine and, on a shared machine, from
+    day to day: the balltrack detector took 1.82 ms per render on 11-23 and 3.68 ms on 11-25.
+    It is bound by Python, the plain pipeline by OpenCV, so their ratio moves with these two
+    figures, measured in the same run.
+    """
+    import cv2
+    import numpy as np
+
+    loop = []
+    for _ in range(SPEED_TRIES):
+        started = time.perf_counter()
+        total = 0
+        for value in range(SPEED_LOOP_ADDITIONS):
+            total += value
+        loop.append((time.perf_counter() - started) * 1000)
+    frame = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        blur = []
+        for _ in range(SPEED_BLURS):
+            started = time.perf_counter()
+            cv2.GaussianBlur(frame, (5, 5), 0)
+            blur.append((time.perf_counter() - started) * 1000)
+    finally:
+        cv2.setNumThreads(threads)
+    return {"python_loop_ms": min(loop), "opencv_blur_ms": min(blur)}
+
+
+def record_machine_speed(result: "ExperimentResult") -> None:
+    """``machine_speed``'s figures as ``<experiment>/machine/...`` and a line in the report."""
+    speed = machine_speed()
+    for name, value in speed.items():
+        result.figure(f"machine/{name}", value)
+    result.notes.append(f"Machine speed in this run: {SPEED_LOOP_ADDITIONS:,} additions in a Python loop "
+                        f"{speed['python_loop_ms']:.1f} ms, a 5x5 blur of a 640x480 frame "
+                        f"{speed['opencv_blur_ms']:.2f} ms (one thread); on another day or machine, "
+                        "compare timings relative to these.")
+
+
 def _read_lines(path: str) -> list[str]:
     try:
         return Path(path).read_text(errors="replace").splitlines()

@@ -27,6 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from balltrack.experiments.base import machine_speed
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 
@@ -106,10 +107,11 @@ TITLE = "Detector speed against the paper's plain pipeline"
 def run(options) -> "ExperimentResult":
     """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
     photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
-    from balltrack.experiments.base import ExperimentResult, Stopwatch
+    from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed
 
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="in-process", quick=options.quick)
+    record_machine_speed(result)
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
@@ -176,7 +178,9 @@ def main(argv: list[str] | None = None) -> int:
             sets["real photos (640x480)"] = frames
         else:
             print(f"detector_speed: no .jpg/.png photos under {photos}", file=sys.stderr)
-    print(f"OpenCV threads: {cv2.getNumThreads()}")
+    speed = machine_speed()
+    print(f"OpenCV threads: {cv2.getNumThreads()}; machine: Python loop {speed['python_loop_ms']:.1f} ms, "
+          f"blur {speed['opencv_blur_ms']:.2f} ms (see experiments.base.machine_speed)")
     print(f"{'frames (640x480)':<22} {'detector':<10} {'wall p50':>9} {'wall p90':>9} "
           f"{'cpu p50':>8} {'cpu p90':>8}  (ms)")
     for name, frames in sets.items():

@@ -45,10 +45,11 @@ def run_demo(run_dir, extra: list[str], time_limit: float) -> dict:
 
 
 def run(options) -> "ExperimentResult":
-    from balltrack.experiments.base import ExperimentResult, Stopwatch
+    from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed
 
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="zenoh", quick=options.quick)
+    record_machine_speed(result)
     folder = options.out / NAME
     folder.mkdir(parents=True, exist_ok=True)
     rows, summaries = [], {}

@@ -91,6 +91,10 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
         ours = figures[f"detector_speed/{name}/balltrack/wall_p50_ms"]
         assert plain > 0 and ours > 0
         assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(plain / ours, rel=1e-5)
+    # (the machine's own speed in the same run: a ratio moves with it)
+    assert figures["detector_speed/machine/python_loop_ms"] > 0
+    assert figures["detector_speed/machine/opencv_blur_ms"] > 0
+    assert "Machine speed in this run" in (tmp_path / "report.md").read_text()
     goals = {goal["name"]: goal for goal in results["goals"]}
     assert set(goals) == {f"detector_speed/{name}" for name in sets}
     for name in sets:
