@@ -43,6 +43,9 @@ WIDE_RAYS = 36
 NARROW_RAYS = 90
 # Largest blur (Gaussian sigma, px) corrected for.
 BLUR_LIMIT = 2.0
+# Tolerance rounds (over radius, floor in px) of the wide and the narrow rounds' robust fits.
+WIDE_FIT_ROUNDS = ((0.3, 2.0), (0.1, 1.0))
+NARROW_FIT_ROUNDS = ((0.08, 1.0), (0.05, 0.6), (0.03, 0.45))
 # The search reaches this many times the colour mask's radius from its centre.
 SILHOUETTE_REACH = 2.6
 # Wide rounds look this many times the current radius (plus 2 px) from its centre; further in
@@ -175,6 +178,41 @@ def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
     return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
 
 
+def edge_widths(gradient: np.ndarray, contrast: np.ndarray, rays: np.ndarray, index: np.ndarray,
+                step: float) -> np.ndarray:
+    """Per edge (at ``index`` along ``rays``), the blur (Gaussian sigma, px) of a step of its
+    ``contrast``: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi))."""
+    slope = gradient[rays, index] / (2 * step)
+    return contrast / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
+
+
+def seen_all_round(directions: np.ndarray, in_view: int, one_sided: float) -> bool:
+    """Whether edges seen along these ray ``directions`` (rows cos, sin) are enough of the
+    ``in_view`` rays and not on one side only (their mean direction at most ``one_sided``)."""
+    count = directions.shape[1]
+    return (count >= max(8, 0.3 * in_view)
+            and math.hypot(np.add.reduce(directions[0]) / count,
+                           np.add.reduce(directions[1]) / count) <= one_sided)
+
+
+def narrow_fit(px: np.ndarray, py: np.ndarray, widths: np.ndarray, directions: np.ndarray,
+               x: float, y: float, radius: float, in_view: int,
+               one_sided: float) -> tuple[float, float, float] | None:
+    """The narrow round's fit on edges a wide round located (points ``px``, ``py`` along ray
+    ``directions``, with their ``widths``, see edge_widths), from the circle it found: the
+    robust geometric circle through them, corrected for blur; None when too few edges lie on
+    it or they lie on one side only."""
+    fitted = robust_circle(px, py, x, y, radius, NARROW_FIT_ROUNDS, geometric=True)
+    if fitted is None or not 0.5 * radius < fitted[2] < 2.0 * radius + 2:
+        return None
+    kept = fitted[3]
+    if not seen_all_round(directions[:, kept], in_view, one_sided):
+        return None
+    # The 50 % contour of a disc blurred by sigma lies sigma^2 / 2r inside its edge.
+    sigma = median(widths[kept])
+    return fitted[0], fitted[1], fitted[2] + min(sigma, BLUR_LIMIT) ** 2 / (2.0 * fitted[2])
+
+
 def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: float,
                ball: Candidate, others: list[Candidate],
                wide_reach: float = WIDE_REACH) -> tuple[float, float, float] | None:
@@ -187,8 +225,12 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
     in front of other edges) or as its outermost edge (a dark side that the colour mask
     misses); the hypothesis that more rays agree on wins (about as many: the larger circle,
     if it fits about as closely). A narrow round then takes each
-    ray's edge nearest the circle. None when too few rays see an edge, when they see it on
-    one side only, or when the result does not contain most of the colour mask's circle.
+    ray's edge nearest the circle; for a ball in full view whose last wide round sampled as
+    finely as a narrow one (radius up to 30 px) and found the circle it started from, the
+    narrow round's fit is made on that round's edges instead (``narrow_fit``: half the cost,
+    radii within 1 % of a narrow round's on the renders). None when too few rays see an
+    edge, when they see it on one side only, or when the result does not contain most of the
+    colour mask's circle.
 
     Rays are used only within the frame (a ball cut by its edge keeps the visible arc) and not
     towards ``others`` (touching balls); a ray whose edge has colour-mask pixels just past it
@@ -228,11 +270,11 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         if wide:  # from just inside the circle to well past it
             start = radius - min(EDGE_MARGIN + 0.15 * radius, 0.4 * radius)
             stop, step = wide_reach * radius + 2, max(RAY_STEP, radius / 60.0)
-            rounds = ((0.3, 2.0), (0.1, 1.0))
+            rounds = WIDE_FIT_ROUNDS
         else:  # a narrow band around the circle found
             band = max(1.5, 0.15 * radius)
             start, stop, step = radius - band, radius + band, RAY_STEP
-            rounds = ((0.08, 1.0), (0.05, 0.6), (0.03, 0.45))
+            rounds = NARROW_FIT_ROUNDS
         half = max(1, int(round(min(EDGE_HALF_WIDTH, 0.3 * radius) / step)))
         radii = np.arange(max(0.0, start - half * step), stop + (half + 1) * step, step,
                           dtype=np.float32)
@@ -294,9 +336,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             if fitted is None:
                 continue
             keep = np.flatnonzero(good)[fitted[3]]
-            if (keep.size < max(8, 0.3 * in_view)
-                    or math.hypot(np.add.reduce(ray_directions[0, keep]) / keep.size,
-                                  np.add.reduce(ray_directions[1, keep]) / keep.size) > one_sided
+            if (not seen_all_round(ray_directions[:, keep], in_view, one_sided)
                     or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
                 continue  # the edge seen on too few rays, or on one side only
             # (how closely a fit follows its edges only tells hypotheses apart)
@@ -304,25 +344,26 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             if len(choices) > 1:
                 residual = np.hypot(px[fitted[3]] - fitted[0], py[fitted[3]] - fitted[1]) - fitted[2]
                 spread = float(np.sqrt(np.add.reduce(residual * residual) / residual.size))
-            # Edge width: a blurred step of contrast C has the steepest slope C / (sigma sqrt(2 pi)).
             # (only the narrow round's result is corrected for blur)
-            sigma = None
+            sigma = edges = None
             if not wide:
-                slope = gradient[rays[keep], index[keep]] / (2 * step)
-                width = contrast[keep] / np.maximum(slope, 1e-6) / math.sqrt(2 * math.pi)
-                sigma = median(width)
-            fits.append((fitted[:3], keep.size, spread, sigma))
+                sigma = median(edge_widths(gradient, contrast[keep], rays[keep], index[keep], step))
+            elif step == RAY_STEP:  # (sampled as finely as a narrow round: its fit may use them)
+                found_edges = np.flatnonzero(good)
+                edges = (px, py, edge_widths(gradient, contrast[found_edges], rays[found_edges],
+                                             index[found_edges], step), ray_directions[:, found_edges])
+            fits.append((fitted[:3], keep.size, spread, sigma, edges))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
-        best = None
+        best = edges = None
         if len(fits) == 1:
-            best, sigma = fits[0][0], fits[0][3]
+            best, sigma, edges = fits[0][0], fits[0][3], fits[0][4]
         elif fits:
             most = max(fit[1] for fit in fits)
             tightest = min(fit[2] for fit in fits if fit[1] >= most / 1.05)
             chosen = max((fit for fit in fits if fit[1] >= most / 1.05 and fit[2] <= 1.5 * tightest + 0.05),
                          key=lambda fit: fit[0][2])
-            best, sigma = chosen[0], chosen[3]
+            best, sigma, edges = chosen[0], chosen[3], chosen[4]
         if best is None:
             return None
         grown = best[2] - radius
@@ -334,6 +375,16 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # Each wide round starts from the last circle, reaching further into a dark side;
         # once the circle stops growing (no dark side, or all of it), the narrow round.
         wide_rounds = SILHOUETTE_WIDE_ROUNDS if grown < 0.05 * radius + 0.3 else wide_rounds + 1
+        # A circle that did not grow lies where this round's edges are: when they were
+        # sampled as finely as a narrow round samples, its fit is made on them instead of new
+        # rays (the edges are points of the outline whichever centre the rays came from).
+        # Not for a ball cut by the frame's edge or beside another: the part of the rim in
+        # view needs the narrow round's denser rays.
+        if wide_rounds >= SILHOUETTE_WIDE_ROUNDS and edges is not None and in_view == samples:
+            refined = narrow_fit(*edges, x, y, radius, in_view, one_sided)
+            if refined is not None:
+                x, y, radius = refined
+                break
     x, y = x + left, y + top
     # The colour mask's circle is the outline or a lit part inside it (a dark side it misses).
     shift = math.hypot(x - x0, y - y0)

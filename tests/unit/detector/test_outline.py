@@ -8,8 +8,10 @@ import pytest
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, rim_directions
 from balltrack.services.detector.mask import ColourMasker
+from balltrack.services.detector import outline
 from balltrack.services.detector.outline import (allowed_samples, crossings, edge_peaks, median,
-                                                 ray_bounds, ray_profiles, shading, silhouette)
+                                                 narrow_fit, ray_bounds, ray_profiles, shading,
+                                                 silhouette)
 from tests import harness
 from tests.unit.detector.drawing import floor, scene, to_uint8
 
@@ -137,6 +139,45 @@ def test_the_outline_of_a_ball_touching_another():
     x, y, radius = silhouette(planes.frame, planes.mask, planes.gain, planes.reference, ball,
                               [neighbour])
     assert math.hypot(x - first[0], y - first[1]) < 0.5 and abs(radius - first[2]) < 0.9
+
+
+def test_narrow_fit_on_edges_seen_from_another_centre():
+    # edges of a circle (12.3, 8.1, r 9) seen along 36 rays from (11.5, 8.6), blur sigma 0.8
+    centre_x, centre_y, radius, sigma = 12.3, 8.1, 9.0, 0.8
+    directions = rim_directions(36)[:2]
+    from_x, from_y = 11.5, 8.6
+    # where each ray from (from_x, from_y) meets the circle
+    offset_x, offset_y = from_x - centre_x, from_y - centre_y
+    along = directions[0] * offset_x + directions[1] * offset_y
+    reach = -along + np.sqrt(along ** 2 - (offset_x ** 2 + offset_y ** 2 - radius ** 2))
+    px, py = from_x + directions[0] * reach, from_y + directions[1] * reach
+    widths = np.full(px.size, sigma)
+    x, y, found = narrow_fit(px, py, widths, directions, from_x, from_y, 9.4, 36, 0.7)
+    assert math.hypot(x - centre_x, y - centre_y) < 1e-6
+    # (the blur correction: the 50 % contour lies sigma^2 / 2r inside the edge)
+    assert found == pytest.approx(radius + sigma ** 2 / (2 * radius), abs=1e-6)
+    # the same edges on one side only prove nothing
+    side = directions[0] > 0.5
+    assert narrow_fit(px[side], py[side], widths[side], directions[:, side], from_x, from_y,
+                      9.4, 36, 0.7) is None
+
+
+@pytest.mark.parametrize("radius", [6.0, 9.5, 15.0, 24.0])
+def test_narrow_fit_on_the_wide_rounds_edges_agrees_with_a_narrow_round(radius, monkeypatch):
+    u, v = 160.35, 120.6
+    image = harness.draw_ball(to_uint8(floor(320, 240)), u, v, radius)
+    planes, mask_circle = planes_and_mask_circle(image)
+    arguments = (planes.frame, planes.mask, planes.gain, planes.reference, mask_circle, [])
+    calls = []
+    real_narrow_fit = outline.narrow_fit
+    monkeypatch.setattr(outline, "narrow_fit", lambda *given: calls.append(1) or real_narrow_fit(*given))
+    reused = silhouette(*arguments)
+    assert calls, "the wide round's edges were not reused"
+    monkeypatch.setattr(outline, "narrow_fit", lambda *given: None)  # a narrow round of its own
+    narrow = silhouette(*arguments)
+    assert math.hypot(reused[0] - narrow[0], reused[1] - narrow[1]) < 0.1
+    assert abs(reused[2] - narrow[2]) < 0.1
+    assert math.hypot(reused[0] - u, reused[1] - v) < 0.2 and abs(reused[2] - radius) < 0.25
 
 
 def test_median_is_numpys():
