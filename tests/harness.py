@@ -178,6 +178,16 @@ def query_config(session, service: str, changes: dict | None = None, namespace: 
     raise AssertionError(f"{service}/config did not answer")
 
 
+def wait_matched(publisher, timeout: float = 20) -> None:
+    """Until the router has told this session of a subscriber on the publisher's key: a client
+    sends a put only where it knows of one, and a service's liveliness token may reach it
+    before its subscriptions do."""
+    deadline = time.monotonic() + timeout
+    while not publisher.matching_status.matching:
+        assert time.monotonic() < deadline, f"no subscriber on {publisher.key_expr} in {timeout} s"
+        time.sleep(0.02)  # polling a status; the deadline bounds it
+
+
 def client(endpoint: str):
     return open_session([endpoint], open_timeout=10)
 

@@ -11,7 +11,7 @@ import pytest
 from balltrack.common.keys import SERVICES
 from balltrack.common.messages import MAX_FRAME_ID, encode, header
 from balltrack.services.simulator.control import send_command
-from tests.harness import Collector, query_config
+from tests.harness import Collector, query_config, wait_matched
 
 HUGE = "x" * 1_000_000
 SMALL_FRAMES = ("width=160", "height=120", "pacing=realtime")
@@ -120,9 +120,11 @@ def test_follower_passes_on_only_the_header_contract_fields(session, launch):
     ball = {"x": 0.2, "y": 0.0, "z": 0.1, "u": 384.0, "v": 240.0, "radius_px": 32.0,
             "image_width": 640, "image_height": 480, "score": 1.0}
     bloated = {"header": {**header(1000, 41), "extra": HUGE}, "balls": [ball]}
-    session.put("detected_balls", msgpack.packb(bloated, use_bin_type=True))
+    detections = session.declare_publisher("detected_balls")
+    wait_matched(detections)  # (the follower's token may reach us before its subscription)
+    detections.put(msgpack.packb(bloated, use_bin_type=True))
     long_frame = {"header": header(2000, 42, "f" * (MAX_FRAME_ID + 1)), "balls": [ball]}
-    session.put("detected_balls", msgpack.packb(long_frame, use_bin_type=True))
+    detections.put(msgpack.packb(long_frame, use_bin_type=True))
 
     def decoded(messages):
         return [msgpack.unpackb(m["payload"], raw=False) for m in messages]
@@ -133,7 +135,7 @@ def test_follower_passes_on_only_the_header_contract_fields(session, launch):
     assert max(len(message["payload"]) for message in commands.messages) < 1000
     assert not [c for c in decoded(commands.messages) if c["header"]["seq"] == 42]
     assert rejected_count(session, "follower", 1) >= 1  # the over-long frame_id
-    session.put("detected_balls", encode("Ball2DArray", {"header": header(3000, 43), "balls": [ball]}))
+    detections.put(encode("Ball2DArray", {"header": header(3000, 43), "balls": [ball]}))
     commands.wait_for(lambda messages: [c for c in decoded(messages) if c["header"]["seq"] == 43],
                       10, "a command for the good detection after the bad ones")
 

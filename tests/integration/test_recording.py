@@ -19,7 +19,7 @@ import zenoh
 
 from balltrack.common.messages import encode, header
 from balltrack.common.recording import Recorder, RecordingFile
-from tests.harness import REPO, Process, process_environment
+from tests.harness import REPO, Process, process_environment, wait_matched
 
 BALLTRACK = [sys.executable, "-m", "balltrack"]
 
@@ -38,14 +38,6 @@ def image(seq: int, width: int = 640, height: int = 480) -> bytes:
     pixels = bytes((seq + index) % 256 for index in range(256)) * (width * height * 3 // 256)
     return encode("Image", {"header": header(5_000_000 * seq, seq), "width": width,
                             "height": height, "encoding": "rgb8", "data": pixels})
-
-
-def wait_matched(publisher, timeout: float = 20) -> None:
-    """Until the router has told us of a subscriber (the recorder's) on this key."""
-    deadline = time.monotonic() + timeout
-    while not publisher.matching_status.matching:
-        assert time.monotonic() < deadline, "the recorder never subscribed"
-        time.sleep(0.02)  # polling a status; the deadline bounds it
 
 
 class Received:

@@ -12,7 +12,8 @@ import zenoh
 
 from balltrack.common.messages import encode, header
 from balltrack.deploy.recording import Recording
-from tests.integration.test_recording import Received, balltrack, wait_matched
+from tests.harness import wait_matched
+from tests.integration.test_recording import Received, balltrack
 
 pytest.importorskip("foxglove")
 descriptor_pb2 = pytest.importorskip("google.protobuf.descriptor_pb2")
