@@ -7,6 +7,7 @@ messages with deadlines.
 
 import msgpack
 import pytest
+import zenoh
 
 from balltrack.common.keys import SERVICES
 from balltrack.common.messages import MAX_FRAME_ID, encode, header
@@ -120,7 +121,8 @@ def test_follower_passes_on_only_the_header_contract_fields(session, launch):
     ball = {"x": 0.2, "y": 0.0, "z": 0.1, "u": 384.0, "v": 240.0, "radius_px": 32.0,
             "image_width": 640, "image_height": 480, "score": 1.0}
     bloated = {"header": {**header(1000, 41), "extra": HUGE}, "balls": [ball]}
-    detections = session.declare_publisher("detected_balls")
+    # (BLOCK: a 1 MB message is many fragments, and under load DROP may lose one of them)
+    detections = session.declare_publisher("detected_balls", congestion_control=zenoh.CongestionControl.BLOCK)
     wait_matched(detections)  # (the follower's token may reach us before its subscription)
     detections.put(msgpack.packb(bloated, use_bin_type=True))
     long_frame = {"header": header(2000, 42, "f" * (MAX_FRAME_ID + 1)), "balls": [ball]}
