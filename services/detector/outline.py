@@ -226,11 +226,10 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
     misses); the hypothesis that more rays agree on wins (about as many: the larger circle,
     if it fits about as closely). A narrow round then takes each
     ray's edge nearest the circle; for a ball in full view whose last wide round sampled as
-    finely as a narrow one (radius up to 30 px) and found the circle it started from, the
-    narrow round's fit is made on that round's edges instead (``narrow_fit``: half the cost,
-    radii within 1 % of a narrow round's on the renders). None when too few rays see an
-    edge, when they see it on one side only, or when the result does not contain most of the
-    colour mask's circle.
+    finely as a narrow one (radius up to 30 px), the narrow round's fit is made on that
+    round's edges instead (``narrow_fit``: a round fewer, radii within 1 % of a narrow
+    round's on the renders). None when too few rays see an edge, when they see it on one side
+    only, or when the result does not contain most of the colour mask's circle.
 
     Rays are used only within the frame (a ball cut by its edge keeps the visible arc) and not
     towards ``others`` (touching balls); a ray whose edge has colour-mask pixels just past it
@@ -375,8 +374,8 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # Each wide round starts from the last circle, reaching further into a dark side;
         # once the circle stops growing (no dark side, or all of it), the narrow round.
         wide_rounds = SILHOUETTE_WIDE_ROUNDS if grown < 0.05 * radius + 0.3 else wide_rounds + 1
-        # A circle that did not grow lies where this round's edges are: when they were
-        # sampled as finely as a narrow round samples, its fit is made on them instead of new
+        # The last wide round's circle was fitted to its edges: when they were sampled as
+        # finely as a narrow round samples, the narrow fit is made on them instead of new
         # rays (the edges are points of the outline whichever centre the rays came from).
         # Not for a ball cut by the frame's edge or beside another: the part of the rim in
         # view needs the narrow round's denser rays.
