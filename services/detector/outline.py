@@ -298,6 +298,9 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             one_sided = max(0.7, math.hypot(np.add.reduce(cos[usable]) / in_view,
                                             np.add.reduce(sin[usable]) / in_view) + 0.1)
         peak, has_edge, gradient = edge_peaks(profiles, allowed)
+        # A wide round of a ball in full view sampled as finely as a narrow round samples:
+        # its edges may serve the narrow fit (see below).
+        reusable = wide and step == RAY_STEP and in_view == samples
         if wide:
             ray_index, sample_index = np.nonzero(peak)
             outline = peak.copy()
@@ -347,7 +350,7 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             sigma = edges = None
             if not wide:
                 sigma = median(edge_widths(gradient, contrast[keep], rays[keep], index[keep], step))
-            elif step == RAY_STEP:  # (sampled as finely as a narrow round: its fit may use them)
+            elif reusable:
                 found_edges = np.flatnonzero(good)
                 edges = (px, py, edge_widths(gradient, contrast[found_edges], rays[found_edges],
                                              index[found_edges], step), ray_directions[:, found_edges])
@@ -374,12 +377,11 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # Each wide round starts from the last circle, reaching further into a dark side;
         # once the circle stops growing (no dark side, or all of it), the narrow round.
         wide_rounds = SILHOUETTE_WIDE_ROUNDS if grown < 0.05 * radius + 0.3 else wide_rounds + 1
-        # The last wide round's circle was fitted to its edges: when they were sampled as
-        # finely as a narrow round samples, the narrow fit is made on them instead of new
-        # rays (the edges are points of the outline whichever centre the rays came from).
-        # Not for a ball cut by the frame's edge or beside another: the part of the rim in
-        # view needs the narrow round's denser rays.
-        if wide_rounds >= SILHOUETTE_WIDE_ROUNDS and edges is not None and in_view == samples:
+        # The last wide round's circle was fitted to its edges: when they are reusable, the
+        # narrow fit is made on them instead of new rays (the edges are points of the outline
+        # whichever centre the rays came from). Not for a ball cut by the frame's edge or
+        # beside another: the part of the rim in view needs the narrow round's denser rays.
+        if wide_rounds >= SILHOUETTE_WIDE_ROUNDS and edges is not None:
             refined = narrow_fit(*edges, x, y, radius, in_view, one_sided)
             if refined is not None:
                 x, y, radius = refined
