@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import threading
+import itertools
 import time
 from pathlib import Path
 
@@ -176,6 +177,22 @@ def query_config(session, service: str, changes: dict | None = None, namespace: 
         if reply.ok is not None:
             return decode("ConfigReply", reply.ok.payload.to_bytes())
     raise AssertionError(f"{service}/config did not answer")
+
+
+def put_until(put, collector: "Collector", predicate, timeout: float, every: float, what: str):
+    """Call ``put(attempt)`` (0, 1, ...) and wait up to ``every`` seconds for
+    ``predicate(collector.messages)``; again until it holds, and return its value. A put can be
+    lost on its way (before a new subscription has reached the writer, or a fragment of a large
+    message under load), and a service may drop a message it cannot use yet. AssertionError
+    after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    for attempt in itertools.count():
+        put(attempt)
+        try:
+            return collector.wait_for(predicate, min(every, max(0.01, deadline - time.monotonic())), what)
+        except AssertionError:
+            if time.monotonic() >= deadline:
+                raise AssertionError(f"no {what} in {timeout} s of putting again every {every} s") from None
 
 
 def wait_matched(publisher, timeout: float = 20) -> None:

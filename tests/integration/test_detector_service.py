@@ -1,7 +1,6 @@
 """The detector as a real process: drawn balls at known 3D positions in, balls out."""
 
 import math
-import time
 
 import pytest
 import zenoh
@@ -9,7 +8,7 @@ import zenoh
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode
 from balltrack.services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import Collector, draw_ball, floor_image, garbage_payloads, query_config
+from tests.harness import Collector, draw_ball, floor_image, garbage_payloads, put_until, query_config
 
 WIDTH, HEIGHT = 640, 480
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
@@ -32,16 +31,10 @@ def publish_and_wait(session, collector, payload, seq, timeout=20):
     dropped on its way on a loaded machine (CI: no answer to a 921 kB frame in 20 s; see
     eclipse-zenoh/zenoh#1494), and the detector keeps only the newest frame by design: the same
     frame is put again every 2 s until the answer comes or ``timeout`` passes."""
-    deadline = time.monotonic() + timeout
-    answered = lambda messages: [m for m in messages if m["header"]["seq"] == seq]  # noqa: E731
-    while True:
-        session.put("camera/image_raw", payload, congestion_control=zenoh.CongestionControl.BLOCK)
-        try:
-            return collector.wait_for(answered, min(2.0, max(0.1, deadline - time.monotonic())),
-                                      f"seq {seq}")[0]
-        except AssertionError:
-            if time.monotonic() >= deadline:
-                raise
+    return put_until(
+        lambda _: session.put("camera/image_raw", payload, congestion_control=zenoh.CongestionControl.BLOCK),
+        collector, lambda messages: [m for m in messages if m["header"]["seq"] == seq], timeout, 2.0,
+        f"seq {seq}")[0]
 
 
 @pytest.mark.parametrize("encoding", ["bgr8", "rgb8", "jpeg"])

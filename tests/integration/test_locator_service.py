@@ -6,7 +6,7 @@ import pytest
 
 from balltrack.common.messages import encode, header
 from balltrack.services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import Collector, garbage_payloads, query_config
+from tests.harness import Collector, garbage_payloads, put_until, query_config
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, HFOV)
@@ -32,13 +32,8 @@ def test_exact_positions_then_live_config_then_clean_exit(session, locator):
     session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
     # Exact mode starts once CameraInfo is in; wait until a located ball shows it is.
     points = [(0.0, 0.05, 0.3), (0.4, 0.1, 1.0), (-0.9, 0.05, 2.0), (1.5, -0.2, 3.5)]
-    for attempt in range(200):
-        session.put("detected_ball", encode("Ball2D", ball_message(points[0], attempt)))
-        try:
-            output.wait_for(lambda m: m and abs(m[-1]["z"] - 0.3) < 0.003, 0.1, "exact mode")
-            break
-        except AssertionError:
-            continue
+    put_until(lambda attempt: session.put("detected_ball", encode("Ball2D", ball_message(points[0], attempt))),
+              output, lambda m: m and abs(m[-1]["z"] - 0.3) < 0.003, 20, 0.1, "exact mode")
     start = len(output.messages)
     for seq, point in enumerate(points, start=1000):
         session.put("detected_ball", encode("Ball2D", ball_message(point, seq)))

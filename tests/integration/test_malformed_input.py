@@ -12,7 +12,7 @@ import zenoh
 from balltrack.common.keys import SERVICES
 from balltrack.common.messages import MAX_FRAME_ID, encode, header
 from balltrack.services.simulator.control import send_command
-from tests.harness import Collector, query_config, wait_matched
+from tests.harness import Collector, put_until, query_config, wait_matched
 
 HUGE = "x" * 1_000_000
 SMALL_FRAMES = ("width=160", "height=120", "pacing=realtime")
@@ -164,14 +164,8 @@ def test_derived_messages_carry_no_extra_header_fields(session, launch, service)
         key = "detected_ball"
     payload = msgpack.packb(message, use_bin_type=True)
     # The locator may not have its camera_info yet: resend until something comes out.
-    for _ in range(50):
-        session.put(key, payload)
-        try:
-            output.wait_for(lambda messages: messages, 0.5, "an output")
-            break
-        except AssertionError:
-            continue
-    produced = output.wait_for(lambda messages: messages, 10, f"{service} output")
+    produced = put_until(lambda _: session.put(key, payload), output, lambda messages: messages, 35, 0.5,
+                         f"{service} output")
     unpacked = msgpack.unpackb(produced[0]["payload"], raw=False)
     assert set(unpacked["header"]) == {"stamp", "frame_id", "seq"}
     assert len(produced[0]["payload"]) < 1000

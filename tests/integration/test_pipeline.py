@@ -7,7 +7,7 @@ import pytest
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode, header
 from balltrack.services.locator.geometry import Intrinsics, project_sphere
-from tests.harness import Collector, draw_ball, floor_image
+from tests.harness import Collector, draw_ball, floor_image, put_until
 
 WIDTH, HEIGHT = 640, 480
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, 1.089)
@@ -34,14 +34,9 @@ def test_frames_to_positions_and_commands(session, pipeline):
         image = draw_ball(floor_image(WIDTH, HEIGHT, seq), u, v, radius)
         stamp = 1_000_000_000 * seq
         # Repeat the frame until its 3D position arrives: the first may precede CameraInfo.
-        for attempt in range(50):
-            session.put("camera/image_raw", encode("Image", bgr_to_message(image, stamp, seq)))
-            try:
-                position = located.wait_for(
-                    lambda m: [x for x in m if x["header"]["seq"] == seq], 2, f"seq {seq}")[-1]
-                break
-            except AssertionError:
-                continue
+        position = put_until(
+            lambda _: session.put("camera/image_raw", encode("Image", bgr_to_message(image, stamp, seq))),
+            located, lambda m: [x for x in m if x["header"]["seq"] == seq], 100, 2, f"seq {seq}")[-1]
         truth = math.dist(point, (0, 0, 0))
         # Stated tolerance: distance within 5%, position within 5% of the distance.
         assert abs(position["distance"] - truth) < 0.05 * truth, (point, position)

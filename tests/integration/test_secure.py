@@ -22,7 +22,7 @@ from balltrack.common.session import load_config_file, open_session, secure_clie
 from balltrack.common.status import liveliness_keys
 from balltrack.deploy.secure import init_profile, permissions
 from balltrack.services.simulator.control import send_command
-from tests.harness import Collector, Liveliness, Process
+from tests.harness import Collector, Liveliness, Process, put_until
 
 SMALL = ("--set", "width=160", "--set", "height=120")
 # Opening a refused session waits this long (Zenoh retries the link until then).
@@ -95,15 +95,9 @@ def twist(linear: float, angular: float) -> bytes:
 def put_until_seen(session, key: str, payload: bytes, collector: Collector, timeout: float = 10) -> None:
     """Put until ``collector`` has it: a new subscription takes a moment to reach publishers,
     and until then Zenoh drops puts at the writer."""
-    deadline = time.monotonic() + timeout
-    while True:
-        session.put(key, payload)
-        try:
-            collector.wait_for(lambda messages: any(m["payload"] == payload for m in messages), 0.2, "")
-            return
-        except AssertionError:
-            if time.monotonic() > deadline:
-                raise AssertionError(f"{payload!r} on {key} never reached the subscriber") from None
+    put_until(lambda _: session.put(key, payload), collector,
+              lambda messages: any(m["payload"] == payload for m in messages), timeout, 0.2,
+              f"{payload!r} on {key} at the subscriber")
 
 
 def moved(before: dict, after: dict) -> float:
