@@ -35,11 +35,12 @@ def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | N
     """Algebraic (Kasa) least-squares circle through points given relative to a point near
     their centre: returns its centre (relative to the same point) and radius, or None."""
     # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
-    squared = dx * dx + dy * dy
-    m00, m01, m11 = float(dx @ dx), float(dx @ dy), float(dy @ dy)
-    # (np.add.reduce is what ndarray.sum calls, without its wrapper: this runs per fit round)
-    m02, m12, m22 = float(np.add.reduce(dx)), float(np.add.reduce(dy)), float(dx.size)
-    t0, t1, t2 = float(dx @ squared), float(dy @ squared), float(np.add.reduce(squared))
+    # (the normal equations' sums as one matrix product: one by one they cost more in calls)
+    rows = np.empty((4, dx.size))
+    rows[0], rows[1], rows[2] = dx, dy, 1.0
+    np.multiply(dx, dx, out=rows[3])
+    rows[3] += dy * dy
+    (m00, m01, m02, t0), (_, m11, m12, t1), (_, _, m22, t2), _ = (rows @ rows.T).tolist()
     solved = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
     if solved is None:
         return None
@@ -57,12 +58,14 @@ def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius:
     for _ in range(iterations):
         dx, dy = px - x, py - y
         distance = np.maximum(np.hypot(dx, dy), 1e-9)
-        ux, uy = dx / distance, dy / distance
-        residual = distance - radius
-        # normal equations of the Jacobian (-ux, -uy, -1)
-        delta = solve_symmetric((float(ux @ ux), float(ux @ uy), float(np.add.reduce(ux)), float(uy @ uy),
-                                 float(np.add.reduce(uy)), float(ux.size)),
-                                (float(ux @ residual), float(uy @ residual), float(np.add.reduce(residual))))
+        # normal equations of the Jacobian (-ux, -uy, -1) and the residuals, as one product
+        rows = np.empty((4, dx.size))
+        np.divide(dx, distance, out=rows[0])
+        np.divide(dy, distance, out=rows[1])
+        rows[2] = 1.0
+        np.subtract(distance, radius, out=rows[3])
+        (m00, m01, m02, t0), (_, m11, m12, t1), (_, _, m22, t2), _ = (rows @ rows.T).tolist()
+        delta = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
         if delta is None:
             break
         shift_x, shift_y, growth = delta

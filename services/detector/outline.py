@@ -314,26 +314,35 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         else:
             away = np.where(peak, np.abs(radii - radius)[None, :], np.inf)
             choices = [(np.argmin(away, axis=1), has_edge)]
-        fits = []
+        # Only rays that may count: a ray's edge is used when all of these hold and its
+        # crossing is defined with no colour mask past it.
+        selected = []
         for index, found in choices:
-            # Only rays that may count: a ray's edge is used when all of these hold and its
-            # crossing is defined with no colour mask past it.
             rays = np.flatnonzero(usable & has_edge & found)
-            if rays.size < max(8, 0.35 * in_view):
-                continue
-            index = index[rays]
-            position, defined, contrast = crossings(profiles, index, half, rays)
+            if rays.size >= max(8, 0.35 * in_view):
+                selected.append((index[rays], rays))
+        fits = []
+        if selected:
+            # (the hypotheses' edges located in one pass: per-call overhead dominates here)
+            all_index = np.concatenate([index for index, _ in selected])
+            all_rays = np.concatenate([rays for _, rays in selected])
+            position, defined, all_contrast = crossings(profiles, all_index, half, all_rays)
             rho = radii[0] + position * step
             # (rows x, y: both coordinates in one operation each)
-            ray_directions = directions[:2, rays]
-            px, py = centre + ray_directions * rho
+            all_directions = directions[:2, all_rays]
+            all_px, all_py = centre + all_directions * rho
             # The colour mask must not go on past the edge (clutter touching the ball).
-            beyond = np.rint(centre + ray_directions * (rho + max(2.0, 0.12 * radius)))
+            beyond = np.rint(centre + all_directions * (rho + max(2.0, 0.12 * radius)))
             bx, by = np.minimum(np.maximum(beyond, 0), last_pixel).astype(np.intp)
-            good = defined & (patch_mask[by, bx] != 255)
+            all_good = defined & (patch_mask[by, bx] != 255)
+        start_at = 0
+        for index, rays in selected:
+            part = slice(start_at, start_at + rays.size)
+            start_at += rays.size
+            good, ray_directions, contrast = all_good[part], all_directions[:, part], all_contrast[part]
             if np.count_nonzero(good) < max(8, 0.35 * in_view):
                 continue
-            px, py = px[good], py[good]
+            px, py = all_px[part][good], all_py[part][good]
             fitted = robust_circle(px, py, x, y, radius, rounds, geometric=not wide)
             if fitted is None:
                 continue
@@ -351,9 +360,10 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             if not wide:
                 sigma = median(edge_widths(gradient, contrast[keep], rays[keep], index[keep], step))
             elif reusable:
+                # (their widths are measured only for the hypothesis chosen, see below)
                 found_edges = np.flatnonzero(good)
-                edges = (px, py, edge_widths(gradient, contrast[found_edges], rays[found_edges],
-                                             index[found_edges], step), ray_directions[:, found_edges])
+                edges = (px, py, (contrast[found_edges], rays[found_edges], index[found_edges]),
+                         ray_directions[:, found_edges])
             fits.append((fitted[:3], keep.size, spread, sigma, edges))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).
@@ -382,7 +392,9 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # whichever centre the rays came from). Not for a ball cut by the frame's edge or
         # beside another: the part of the rim in view needs the narrow round's denser rays.
         if wide_rounds >= SILHOUETTE_WIDE_ROUNDS and edges is not None:
-            refined = narrow_fit(*edges, x, y, radius, in_view, one_sided)
+            px, py, (contrast, rays, index), ray_directions = edges
+            refined = narrow_fit(px, py, edge_widths(gradient, contrast, rays, index, step),
+                                 ray_directions, x, y, radius, in_view, one_sided)
             if refined is not None:
                 x, y, radius = refined
                 break
