@@ -5,7 +5,8 @@
    so that the blur keeps the colour information that uint8 rounding would otherwise
    destroy. Pixels the gain would clip keep their colour (``brighten``).
 2. Gaussian blur, then HSV; adaptive histogram equalisation (CLAHE) of V, which the
-   ``v_min``/``v_max`` test uses, so that test is relative to the local brightness. Hue and
+   ``v_min``/``v_max`` test uses, so that test is relative to the local brightness (of frames
+   wider than 320 px, on the half-size V plane made by ``regions.half_value``). Hue and
    saturation do not depend on brightness: a dark ball keeps its colour.
 3. Colour mask: the HSV ranges, and a chroma (max - min channel, raw units) of at least
    ``min_chroma``, below which a pixel's hue is rounding or sensor noise (a dark grey floor).
@@ -28,7 +29,7 @@ import numpy as np
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
-                                                 doubled_part, grown_box, regions_apply,
+                                                 doubled_part, grown_box, half_value, regions_apply,
                                                  source_span)
 
 # The reference level's bright end is that of 3x3 areas of the frame's quarter sample (12x12
@@ -198,7 +199,7 @@ class ColourMasker:
         # Adaptive histogram equalisation: v_min/v_max apply to locally normalised brightness,
         # so a ball in a shadow keeps its dark side in the mask.
         if equalised is None:
-            equalised = self.equalise(value)
+            equalised = self.equalise(value, gained)
 
         mask = hue_mask(hue, config)
         mask &= cv2.inRange(saturation, config.s_min, config.s_max)
@@ -226,7 +227,7 @@ class ColourMasker:
             return None
         mask = np.zeros((height, width), np.uint8)
         chroma = np.zeros((height, width), np.uint8)
-        equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained, config.blur_kernel)
+        equaliser = (PartEqualiser(self._part_clahe, config.clahe_tile_grid, gained)
                      if self._part_clahe is not None else None)
         done = 0
         extent = (width, height, 0, 0)
@@ -260,8 +261,9 @@ class ColourMasker:
             pending = grown
         return None
 
-    def equalise(self, value: np.ndarray) -> np.ndarray:
-        """CLAHE of the value channel; on a half-size copy for frames wider than 320 px.
+    def equalise(self, value: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """CLAHE of the value channel of ``frame`` (``value``, of its blurred copy); for frames
+        wider than 320 px, of its half-size value plane (``regions.half_value``), scaled back up.
 
         The result only feeds the v_min/v_max test, which needs local brightness, not detail,
         and CLAHE is the costliest step of the colour mask at full size.
@@ -271,5 +273,4 @@ class ColourMasker:
         height, width = value.shape
         if width <= 320 or height < 64:
             return self._clahe.apply(value)
-        small = cv2.resize(value, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
-        return cv2.resize(self._clahe.apply(small), (width, height), interpolation=cv2.INTER_LINEAR)
+        return cv2.resize(self._clahe.apply(half_value(frame)), (width, height), interpolation=cv2.INTER_LINEAR)

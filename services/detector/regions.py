@@ -43,6 +43,11 @@ MAX_BLOBS = 12
 BOX_OVERHEAD_PIXELS = 6000
 # Beyond this share of the frame in boxes, doing the whole frame is cheaper.
 MAX_REGION_SHARE = 0.3
+# CLAHE reads the value plane at half size (see ColourMasker.equalise), smoothed by a Gaussian
+# of this sigma (half-size px) after its 2x2 averages: with them, about as smooth as the colour
+# mask's 5 px blur leaves the frame (sigma 1.1 px, plus 0.6 px for the averages), and a
+# Gaussian of a single half-size plane costs a small fraction of one of the colour frame.
+HALF_VALUE_SIGMA = 0.55
 # Once the parts of the half-size plane have needed more than this share of its CLAHE tiles
 # (in all), the whole plane is equalised, once, instead.
 PART_TILES_SHARE = 0.5
@@ -129,20 +134,24 @@ def merged_boxes(boxes: list[Box]) -> list[Box]:
     return boxes
 
 
-def half_value(frame: np.ndarray, kernel: int, rows: slice, columns: slice) -> np.ndarray:
-    """Rows and columns of the half-size value plane of ``frame`` blurred by a ``kernel`` px
-    Gaussian, as the whole-frame route makes it (blur, max channel, 2x2 averages), from the
-    part of the frame they cover."""
+def half_value(frame: np.ndarray, rows: slice | None = None, columns: slice | None = None) -> np.ndarray:
+    """Rows and columns (default all) of the frame's half-size value plane: the brightest
+    channel of its 2x2 averages, blurred by HALF_VALUE_SIGMA; read from the part of the frame
+    they cover and a half-size pixel around it, so that a part is the whole plane's."""
     height, width = frame.shape[:2]
-    reach = kernel // 2  # (the blur's reach: a margin it reads, cut off after it)
-    top, left = max(0, 2 * rows.start - reach), max(0, 2 * columns.start - reach)
-    part = frame[top:min(height, 2 * rows.stop + reach), left:min(width, 2 * columns.stop + reach)]
-    if kernel > 1:
-        part = cv2.GaussianBlur(part, (kernel, kernel), 0)
-    value = cv2.max(cv2.max(cv2.extractChannel(part, 0), cv2.extractChannel(part, 1)),
-                    cv2.extractChannel(part, 2))
-    value = value[2 * rows.start - top:2 * rows.stop - top, 2 * columns.start - left:2 * columns.stop - left]
-    return cv2.resize(value, (value.shape[1] // 2, value.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    rows = rows if rows is not None else slice(0, height // 2)
+    columns = columns if columns is not None else slice(0, width // 2)
+    # (the blur reads one half-size pixel past the part: two of the frame, where it has them)
+    top, left = max(0, rows.start - 1), max(0, columns.start - 1)
+    bottom, right = min(height // 2, rows.stop + 1), min(width // 2, columns.stop + 1)
+    # (the brightest channel of the 2x2 averages: averaging first, the channels are a quarter
+    # of the pixels)
+    half = cv2.resize(frame[2 * top:2 * bottom, 2 * left:2 * right], (right - left, bottom - top),
+                      interpolation=cv2.INTER_AREA)
+    value = cv2.max(cv2.max(cv2.extractChannel(half, 0), cv2.extractChannel(half, 1)),
+                    cv2.extractChannel(half, 2))
+    value = cv2.GaussianBlur(value, (3, 3), HALF_VALUE_SIGMA)
+    return value[rows.start - top:rows.stop - top, columns.start - left:columns.stop - left]
 
 
 def source_span(rows: slice, columns: slice, height: int, width: int) -> tuple[slice, slice]:
@@ -177,11 +186,10 @@ class PartEqualiser:
     needed PART_TILES_SHARE of its tiles in all (parts' tiles overlap).
     """
 
-    def __init__(self, clahe: cv2.CLAHE, grid: int, frame: np.ndarray, kernel: int):
+    def __init__(self, clahe: cv2.CLAHE, grid: int, frame: np.ndarray):
         self._clahe = clahe
         self._grid = grid
         self._frame = frame
-        self._kernel = kernel
         height, width = frame.shape[0] // 2, frame.shape[1] // 2
         self._size = (height, width)
         self._tile = (height // grid, width // grid)
@@ -201,13 +209,12 @@ class PartEqualiser:
             self._tiles_done += tiles[0] * tiles[1]
             if self._tiles_done <= PART_TILES_SHARE * self._grid * self._grid:
                 self._clahe.setTilesGridSize((tiles[1], tiles[0]))
-                equalised = self._clahe.apply(half_value(self._frame, self._kernel, tile_rows, tile_columns))
+                equalised = self._clahe.apply(half_value(self._frame, tile_rows, tile_columns))
                 return equalised[rows.start - tile_rows.start:rows.stop - tile_rows.start,
                                  columns.start - tile_columns.start:columns.stop - tile_columns.start]
         if self._whole is None:
             self._clahe.setTilesGridSize((self._grid, self._grid))
-            self._whole = self._clahe.apply(half_value(self._frame, self._kernel, slice(0, height),
-                                                       slice(0, width)))
+            self._whole = self._clahe.apply(half_value(self._frame))
         return self._whole[rows, columns]
 
 

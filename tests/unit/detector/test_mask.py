@@ -2,6 +2,7 @@
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -150,11 +151,12 @@ def test_extremely_dark_frames_use_wider_averages():
 
 def test_equalise_is_identity_without_clahe():
     value = np.random.default_rng(0).integers(0, 256, (100, 120), dtype=np.uint8)
-    assert ColourMasker(DetectorConfig(clahe_clip_limit=0.0)).equalise(value) is value
-    equalised = ColourMasker(DetectorConfig()).equalise(value)
+    frame = cv2.merge([value, value, value])
+    assert ColourMasker(DetectorConfig(clahe_clip_limit=0.0)).equalise(value, frame) is value
+    equalised = ColourMasker(DetectorConfig()).equalise(value, frame)
     assert equalised.shape == value.shape and equalised.dtype == np.uint8
     wide = np.tile(np.linspace(20, 60, 640, dtype=np.uint8), (480, 1))
-    stretched = ColourMasker(DetectorConfig()).equalise(wide)
+    stretched = ColourMasker(DetectorConfig()).equalise(wide, cv2.merge([wide, wide, wide]))
     assert stretched.shape == wide.shape
     # local equalisation spreads a narrow range of brightness
     assert int(stretched.max()) - int(stretched.min()) > int(wide.max()) - int(wide.min())

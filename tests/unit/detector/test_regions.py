@@ -5,8 +5,8 @@ import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.mask import ColourMasker
-from balltrack.services.detector.regions import (PartEqualiser, coarse_boxes, coarse_hue_table,
-                                                 doubled_part, regions_apply,
+from balltrack.services.detector.regions import (HALF_VALUE_SIGMA, PartEqualiser, coarse_boxes,
+                                                 coarse_hue_table, doubled_part, half_value, regions_apply,
                                                  source_span)
 from tests.unit.detector.drawing import scene
 
@@ -23,15 +23,27 @@ def test_doubled_part_is_the_part_of_the_doubled_plane():
         assert np.array_equal(doubled_part(small[span], span, rows, columns), doubled[rows, columns])
 
 
+def test_half_value_of_a_part_is_the_whole_planes_part():
+    rng = np.random.default_rng(2)
+    frame = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    whole = half_value(frame)
+    value = np.max(cv2.resize(frame, (80, 60), interpolation=cv2.INTER_AREA), axis=2)
+    assert np.array_equal(whole, cv2.GaussianBlur(value, (3, 3), HALF_VALUE_SIGMA))
+    for _ in range(100):
+        top, left = int(rng.integers(0, 59)), int(rng.integers(0, 79))
+        rows = slice(top, int(rng.integers(top + 1, 61)))
+        columns = slice(left, int(rng.integers(left + 1, 81)))
+        assert np.array_equal(half_value(frame, rows, columns), whole[rows, columns])
+
+
 def test_part_equaliser_matches_the_whole_frame_route_within_rounding():
     image = scene([(200.0, 150.0, 20.0), (500.0, 380.0, 35.0)], brightness=0.6)
-    masker = ColourMasker(DetectorConfig())  # clahe 2.0 on an 8x8 grid, blur 5
+    masker = ColourMasker(DetectorConfig())  # clahe 2.0 on an 8x8 grid
     value = cv2.extractChannel(cv2.cvtColor(cv2.GaussianBlur(image, (5, 5), 0), cv2.COLOR_BGR2HSV), 2)
-    whole = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(
-        cv2.resize(value, (320, 240), interpolation=cv2.INTER_AREA))
+    whole = cv2.createCLAHE(clipLimit=2.0, tileGridSize=(8, 8)).apply(half_value(image))
     assert np.array_equal(cv2.resize(whole, (640, 480), interpolation=cv2.INTER_LINEAR),
-                          masker.equalise(value))
-    equaliser = PartEqualiser(cv2.createCLAHE(clipLimit=2.0), 8, image, 5)
+                          masker.equalise(value, image))
+    equaliser = PartEqualiser(cv2.createCLAHE(clipLimit=2.0), 8, image)
     rows, columns = slice(60, 95), slice(85, 120)
     part = equaliser.part(rows, columns)
     # (OpenCV interpolates between tiles in float: a part's weights may round differently)
