@@ -299,8 +299,10 @@ class BallDetector:
         """The candidates of the mask pieces left next to freshly accepted balls (see
         _contour_candidates), judged."""
         results: list[Measured] = []
-        search = leftover_search(search, explained)
-        for contour in leftover_blobs(balls, explained):
+        blobs = leftover_blobs(balls, explained)
+        if blobs:
+            search = leftover_search(search, explained)
+        for contour in blobs:
             found = self._contour_candidates(contour, search, explained)
             for candidate, metrics in found:
                 candidate.score = judge(metrics, self.config) or 0.0
