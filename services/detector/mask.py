@@ -89,17 +89,18 @@ def quarter_sample(image_bgr: np.ndarray) -> np.ndarray:
     return cv2.resize(image_bgr, (max(1, width // 4), max(1, height // 4)), interpolation=cv2.INTER_NEAREST)
 
 
-def reference_level(image_bgr: np.ndarray, small: np.ndarray | None = None) -> float:
+def reference_level(image_bgr: np.ndarray, value: np.ndarray | None = None) -> float:
     """The frame's bright level: 99th percentile of V over 3x3 areas (of the sample), but at
     most 3x its median.
 
     The cap keeps a small bright area (the sky above a dimly lit floor, a lamp) from
     setting the level of a dark frame. Measured on a 1/4-size nearest-neighbour sample
-    (``small``: the frame's ``quarter_sample`` when already made).
+    (``value``: the V plane of the frame's ``quarter_sample`` when already made).
     """
-    if small is None:
+    if value is None:
         small = quarter_sample(image_bgr)
-    value = np.maximum(np.maximum(small[:, :, 0], small[:, :, 1]), small[:, :, 2])
+        value = cv2.max(cv2.max(cv2.extractChannel(small, 0), cv2.extractChannel(small, 1)),
+                        cv2.extractChannel(small, 2))
     last = value.size - 1
     median = np.partition(value.ravel(), last // 2)[last // 2]
     # The bright level of areas, not of single pixels: isolated glints, hot pixels and
@@ -160,7 +161,9 @@ class ColourMasker:
         """The cleaned colour mask of a checked BGR frame, with the planes the checks read."""
         config = self.config
         small = quarter_sample(image_bgr)
-        reference = reference_level(image_bgr, small)
+        # (the sample's HSV serves the reference level, its V, and the regions' coarse search)
+        small_hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+        reference = reference_level(image_bgr, cv2.extractChannel(small_hsv, 2))
         gain = frame_gain(reference, config)
         # Dark frames are scaled up before the blur, so that the blur's averaging keeps the
         # sub-unit colour information that uint8 rounding would otherwise destroy.
@@ -174,8 +177,9 @@ class ColourMasker:
         if not dark and regions_apply(gained.shape):
             # (nearest-neighbour sampling commutes with the per-pixel gain: the regions' coarse
             # search reads the same sample of the gained frame)
-            small_gained = brighten(small, gain, small) if gain > 1.0 else small
-            found = self._mask_in_regions(gained, gain, small_gained)
+            if gain > 1.0:
+                small_hsv = cv2.cvtColor(brighten(small, gain, small), cv2.COLOR_BGR2HSV)
+            found = self._mask_in_regions(gained, gain, small_hsv)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
                                     reference=min(255.0, reference * gain), dark=dark, extent=found[2])
@@ -214,15 +218,16 @@ class ColourMasker:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
         return mask, chroma
 
-    def _mask_in_regions(self, gained: np.ndarray, gain: float, small: np.ndarray | None = None
+    def _mask_in_regions(self, gained: np.ndarray, gain: float, sample_hsv: np.ndarray | None = None
                          ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
         """Steps 2-4 only in boxes around what may be ball-coloured (see ``regions.py``), each
         grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere, and the
         bounding box of the boxes; None (do the whole frame) when the boxes would cover too
-        much of it. ``small``: the gained frame's ``quarter_sample`` when already made."""
+        much of it. ``sample_hsv``: the HSV of the gained frame's ``quarter_sample`` when
+        already made."""
         config = self.config
         height, width = gained.shape[:2]
-        pending = coarse_boxes(gained, self._coarse_hue, config, small)
+        pending = coarse_boxes(gained, self._coarse_hue, config, sample_hsv)
         if pending is None:
             return None
         mask = np.zeros((height, width), np.uint8)

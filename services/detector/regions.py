@@ -73,16 +73,16 @@ def regions_apply(shape: tuple[int, ...]) -> bool:
 
 
 def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfig,
-                 small: np.ndarray | None = None) -> list[Box] | None:
+                 sample_hsv: np.ndarray | None = None) -> list[Box] | None:
     """Boxes holding every pixel of ``frame`` whose colour may pass the mask, found on every
-    COARSE_STEP-th pixel of it; None when they would cover too much of it. ``small``: that
-    sample (nearest-neighbour, COARSE_STEP times smaller) when already made."""
+    COARSE_STEP-th pixel of it; None when they would cover too much of it. ``sample_hsv``:
+    the HSV of that sample (nearest-neighbour, COARSE_STEP times smaller) when already made."""
     height, width = frame.shape[:2]
     # (every 4th pixel: a ball of min_radius 3 px holds one wherever it lies)
     size = (width // COARSE_STEP, height // COARSE_STEP)
-    if small is None or small.shape[1::-1] != size:
-        small = cv2.resize(frame, size, interpolation=cv2.INTER_NEAREST)
-    hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+    hsv = sample_hsv
+    if hsv is None or hsv.shape[1::-1] != size:
+        hsv = cv2.cvtColor(cv2.resize(frame, size, interpolation=cv2.INTER_NEAREST), cv2.COLOR_BGR2HSV)
     coarse = cv2.LUT(cv2.extractChannel(hsv, 0), hue_table)
     coarse &= cv2.inRange(cv2.extractChannel(hsv, 1), int(config.s_min * COARSE_SATURATION_SHARE), 255)
     if not cv2.countNonZero(coarse):
