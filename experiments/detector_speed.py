@@ -13,6 +13,10 @@ The plain pipeline is the paper's (section 2.2): Gaussian blur 5, HSV, CLAHE on 
 with the detector's HSV ranges, ``HoughCircles`` on the mask with the detector's Hough
 parameters, no checks.
 
+It then splits the balltrack detector's time by stage (``BallDetector.stage_times``): colour
+mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
+the ones its p50 reads.
+
 Example::
 
     balltrack experiment detector_speed --photos /work/shared/data
@@ -29,7 +33,7 @@ import numpy as np
 
 from balltrack.experiments.base import machine_speed
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector
+from balltrack.services.detector.detector import STAGES, BallDetector
 
 DEFAULT_PHOTOS = Path("/work/shared/data")
 GOAL_RATIO = 2.0
@@ -104,6 +108,48 @@ NAME = "detector_speed"
 TITLE = "Detector speed against the paper's plain pipeline"
 
 
+def stage_breakdown(detector: BallDetector, frames: list[np.ndarray], passes: int = 3) -> dict[str, dict[str, float]]:
+    """Where the balltrack detector's time goes: per stage of ``STAGES``, its mean ms per
+    frame over every frame (``all``) and over the middle fifth of the frames by their total
+    time (``middle``: the frames a p50 reads). Each frame's fastest of ``passes`` calls, one
+    detector alone (not alternating: this splits the time, the ratio is measured apart)."""
+    per_frame = []
+    try:
+        for frame in frames:
+            fastest = None
+            for _ in range(passes):
+                detector.stage_times = {}
+                detector.detect(frame)
+                total = sum(detector.stage_times.values())
+                if fastest is None or total < fastest[0]:
+                    fastest = (total, detector.stage_times)
+            per_frame.append(fastest)
+    finally:
+        detector.stage_times = None
+    per_frame.sort(key=lambda entry: entry[0])
+    count = len(per_frame)
+    middle = per_frame[2 * count // 5:max(2 * count // 5 + 1, 3 * count // 5)]
+
+    def mean_ms(group, stage: str) -> float:
+        return 1000 * sum(times.get(stage, 0.0) for _, times in group) / len(group)
+
+    return {stage: {"all": mean_ms(per_frame, stage), "middle": mean_ms(middle, stage)} for stage in STAGES}
+
+
+def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]]) -> list[list[str]]:
+    """Table rows (stage, then per set: all frames, middle fifth) of ``stage_breakdown``s."""
+    rows = []
+    for stage in (*STAGES, "total"):
+        row = [stage]
+        for stages in breakdowns.values():
+            for group in ("all", "middle"):
+                value = (sum(times[group] for times in stages.values()) if stage == "total"
+                         else stages[stage][group])
+                row.append(f"{value:.2f}")
+        rows.append(row)
+    return rows
+
+
 def run(options) -> "ExperimentResult":
     """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
     photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
@@ -122,7 +168,7 @@ def run(options) -> "ExperimentResult":
         if photos is not None and (frames := photo_frames(photos)):
             sets["photos"] = frames
         repeats = 60 if options.quick else 300
-        rows = []
+        rows, breakdowns = [], {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats)
             for detector_name, figures_of in measured.items():
@@ -137,10 +183,20 @@ def run(options) -> "ExperimentResult":
             rows.append([name, len(frames),
                          f"{plain:.2f} / {measured['plain']['wall_p90_ms']:.2f}",
                          f"{ours:.2f} / {measured['balltrack']['wall_p90_ms']:.2f}", f"{speedup:.2f}"])
+            breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, 1 if options.quick else 3)
+            for stage, times in breakdowns[name].items():
+                result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
+                result.figure(f"{name}/stage/{stage}/middle_ms", times["middle"])
         result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
                       "plain / balltrack"], rows,
                      f"Calls alternating on the same frames, {repeats} per detector and set, "
                      "OpenCV on one thread:")
+        result.table(["stage", *(f"{name}: {group}" for name in breakdowns
+                                 for group in ("all frames", "middle fifth"))], breakdown_rows(breakdowns),
+                     "Where the balltrack detector's time goes, ms per frame (the fastest of 3 calls per "
+                     "frame, the detector alone; middle fifth = the frames nearest its median, which "
+                     "the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, acceptance = 7, "
+                     "outline = 8-9 (see services/detector/detector.py):")
         result.settings = {"photos": str(photos) if "photos" in sets else "none",
                            "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}
     finally:
@@ -181,6 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     speed = machine_speed()
     print(f"OpenCV threads: {cv2.getNumThreads()}; machine: Python loop {speed['python_loop_ms']:.1f} ms, "
           f"blur {speed['opencv_blur_ms']:.2f} ms (see experiments.base.machine_speed)")
+    breakdowns = {}
     print(f"{'frames (640x480)':<22} {'detector':<10} {'wall p50':>9} {'wall p90':>9} "
           f"{'cpu p50':>8} {'cpu p90':>8}  (ms)")
     for name, frames in sets.items():
@@ -192,6 +249,11 @@ def main(argv: list[str] | None = None) -> int:
         verdict = "PASS" if ratio >= GOAL_RATIO else "MISS"
         print(f"{name:<22} ratio plain/balltrack (wall p50) {ratio:.2f}; goal {GOAL_RATIO:g}x faster "
               f"than plain: {verdict}  ({len(frames)} frames)")
+        breakdowns[name] = stage_breakdown(detectors["balltrack"], frames)
+    print("balltrack detector, ms per frame by stage (all frames / the middle fifth, which the p50 reads):")
+    for row in breakdown_rows(breakdowns):
+        print(f"  {row[0]:<12} " + "   ".join(f"{name}: {row[1 + 2 * index]} / {row[2 + 2 * index]}"
+                                               for index, name in enumerate(breakdowns)))
     return 0
 
 

@@ -47,6 +47,7 @@ Example::
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import cv2
@@ -77,7 +78,9 @@ MAX_ROUNDS = 3
 # A ball holds no other ball: a circle mostly (half its area) inside a passing one of at least
 # this many times its radius is part of it (a patch between a logo's letters, a piece of rim).
 CONTAINED_RATIO = 3.0
-
+# The stages ``BallDetector.stage_times`` adds up (seconds), in the order they run: steps 1-4,
+# 5-6, 7 and 8-9 of the pipeline above.
+STAGES = ("colour mask", "blobs", "acceptance", "outline")
 
 
 @dataclass(frozen=True)
@@ -110,10 +113,14 @@ class BallDetector:
         self._masker = ColourMasker(self.config)
         # When a list, every judged candidate is appended as (candidate, metrics, score).
         self._debug: list | None = None
+        # When a dict, each call adds the seconds it spent in each of STAGES (profiling: which
+        # stage a speed-up must come from; see experiments/detector_speed.py).
+        self.stage_times: dict[str, float] | None = None
 
     # ----------------------------------------------------------------------------- public
     def detect(self, image_bgr: np.ndarray) -> DetectionResult:
         """Detect balls in one frame; ``image_bgr`` is uint8 HxWx3 (HxW grey is accepted)."""
+        started = time.perf_counter()
         image = check_image(image_bgr)
         height, width = image.shape[:2]
         config = self.config
@@ -125,6 +132,7 @@ class BallDetector:
             work = cv2.resize(image, work_size, interpolation=cv2.INTER_AREA)
 
         planes = self._masker.planes(work)
+        self._lap("colour mask", started)
         candidates = self._find_candidates(planes, scale)
         detections = [Detection(u=c.x / scale, v=c.y / scale, radius_px=c.radius / scale,
                                 score=round(c.score, 4)) for c in candidates]
@@ -138,14 +146,24 @@ class BallDetector:
         return self._masker.planes(check_image(image_bgr)).mask
 
     # ------------------------------------------------------------------------- candidates
+    def _lap(self, stage: str, started: float) -> float:
+        """Add the time since ``started`` to ``stage`` when profiling; returns the time now."""
+        now = time.perf_counter()
+        if self.stage_times is not None:
+            self.stage_times[stage] = self.stage_times.get(stage, 0.0) + now - started
+        return now
+
     def _find_candidates(self, planes: ColourPlanes, scale: float) -> list[Candidate]:
+        started = time.perf_counter()
         contours, shape_mask = fill_holes(planes.mask, planes.extent)
         if not contours:
+            self._lap("blobs", started)
             return []
         search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
             measured.extend(self._contour_candidates(contour, search, shape_mask))
+        self._lap("blobs", started)
         return self._accept(measured, search)
 
     def _contour_candidates(self, contour: np.ndarray, search: FrameSearch,
@@ -229,6 +247,7 @@ class BallDetector:
         or pair of balls, which its enclosing circle alone would take for one.
         """
         config = self.config
+        started = time.perf_counter()
         for candidate, metrics in measured:
             candidate.score = judge(metrics, config) or 0.0
         pending = sorted(without_contained(measured), key=acceptance_order, reverse=True)
@@ -270,7 +289,9 @@ class BallDetector:
             pending.sort(key=acceptance_order, reverse=True)
         accepted.sort(key=lambda c: c.score, reverse=True)
         accepted = accepted[:config.max_detections]
+        started = self._lap("acceptance", started)
         accepted = self._outlines(accepted, still, explained, search)
+        self._lap("outline", started)
         accepted.sort(key=lambda c: c.radius, reverse=True)
         return accepted
 

@@ -11,6 +11,7 @@ import platform
 import pytest
 
 from balltrack.experiments import cli
+from balltrack.services.detector.detector import STAGES
 
 
 def test_illumination_writes_results_report_and_plots(tmp_path):
@@ -94,7 +95,14 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     # (the machine's own speed in the same run: a ratio moves with it)
     assert figures["detector_speed/machine/python_loop_ms"] > 0
     assert figures["detector_speed/machine/opencv_blur_ms"] > 0
-    assert "Machine speed in this run" in (tmp_path / "report.md").read_text()
+    report = (tmp_path / "report.md").read_text()
+    assert "Machine speed in this run" in report
+    # Where the balltrack detector's time goes, per stage: the renders have a ball, so every
+    # stage has run, and the middle fifth of the frames is some of them.
+    for stage in STAGES:
+        assert figures[f"detector_speed/renders/stage/{stage}/all_ms"] > 0
+        assert figures[f"detector_speed/renders/stage/{stage}/middle_ms"] >= 0
+    assert "Where the balltrack detector's time goes" in report
     goals = {goal["name"]: goal for goal in results["goals"]}
     assert set(goals) == {f"detector_speed/{name}" for name in sets}
     for name in sets:

@@ -11,6 +11,7 @@ balls whose unlit side is black. Every found ball must be within 0.5 px (centre)
 import dataclasses
 import json
 import math
+import time
 from pathlib import Path
 
 import cv2
@@ -22,7 +23,7 @@ from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import (BallDetector, Detection, DetectionResult,
+from balltrack.services.detector.detector import (STAGES, BallDetector, Detection, DetectionResult,
                                                   acceptance_order, without_contained)
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import EXPLAINED
@@ -62,6 +63,26 @@ def test_finds_one_ball_of_any_size_anywhere(detector, radius, u, v):
 
 def test_finds_a_ball_filling_much_of_the_frame(detector):
     assert_found(detector.detect(scene([(330.0, 260.0, 150.0)])).detections, 330.0, 260.0, 150.0)
+
+
+def test_stage_times_split_a_call_among_the_stages_it_ran():
+    profiled = BallDetector(DetectorConfig())
+    frame = scene([(330.0, 260.0, 30.0)])
+    profiled.stage_times = {}
+    started = time.perf_counter()
+    result = profiled.detect(frame)
+    elapsed = time.perf_counter() - started
+    assert len(result.detections) == 1
+    assert set(profiled.stage_times) == set(STAGES)  # a ball found: every stage ran
+    assert all(seconds > 0 for seconds in profiled.stage_times.values())
+    assert sum(profiled.stage_times.values()) <= elapsed  # parts of the call, not more
+    # A ball-free frame stops after the blobs; the times add up call after call.
+    before = dict(profiled.stage_times)
+    profiled.detect(scene([], seed=1))
+    assert profiled.stage_times["colour mask"] > before["colour mask"]
+    assert profiled.stage_times["outline"] == before["outline"]
+    # Off by default: nothing is kept.
+    assert BallDetector(DetectorConfig()).stage_times is None
 
 
 def test_no_detection_on_ball_free_frames(detector):
