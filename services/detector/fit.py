@@ -34,12 +34,23 @@ def solve_symmetric(matrix: tuple[float, float, float, float, float, float],
 def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | None:
     """Algebraic (Kasa) least-squares circle through points given relative to a point near
     their centre: returns its centre (relative to the same point) and radius, or None."""
-    # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
-    # (the normal equations' sums as one matrix product: one by one they cost more in calls)
+    return kasa_circle(kasa_rows(dx, dy))
+
+
+def kasa_rows(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """The rows (dx, dy, 1, dx^2 + dy^2) of points' Kasa fit (see kasa_circle)."""
     rows = np.empty((4, dx.size))
     rows[0], rows[1], rows[2] = dx, dy, 1.0
     np.multiply(dx, dx, out=rows[3])
     rows[3] += dy * dy
+    return rows
+
+
+def kasa_circle(rows: np.ndarray) -> tuple[float, float, float] | None:
+    """The Kasa circle of points (their ``kasa_rows``, or some of their columns): centre
+    relative to the points' origin and radius, or None."""
+    # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
+    # (the normal equations' sums as one matrix product: one by one they cost more in calls)
     (m00, m01, m02, t0), (_, m11, m12, t1), (_, _, m22, t2), _ = (rows @ rows.T).tolist()
     solved = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
     if solved is None:
@@ -85,15 +96,21 @@ def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: fl
     ``rounds``: (tolerance over radius, tolerance floor in pixels) per round. None when fewer
     than 8 points are within a round's tolerance or a fit is degenerate.
     """
+    # The points relative to the first centre and their Kasa rows, made once: a round only
+    # selects the points near its circle (a Kasa circle is the same from any origin).
+    dx, dy = px - x, py - y
+    rows = kasa_rows(dx, dy)
+    centre_x = centre_y = 0.0
     for tolerance_ratio, tolerance_floor in rounds:
-        dx, dy = px - x, py - y
-        keep = np.abs(np.hypot(dx, dy) - radius) < max(tolerance_floor, tolerance_ratio * radius)
+        keep = (np.abs(np.hypot(dx - centre_x, dy - centre_y) - radius)
+                < max(tolerance_floor, tolerance_ratio * radius))
         if np.count_nonzero(keep) < 8:
             return None
-        fitted = fit_circle(dx[keep], dy[keep])
+        fitted = kasa_circle(rows[:, keep])
         if fitted is None:
             return None
-        x, y, radius = x + fitted[0], y + fitted[1], fitted[2]
+        centre_x, centre_y, radius = fitted
+    x, y = x + centre_x, y + centre_y
     if geometric:
         x, y, radius = geometric_circle(px[keep], py[keep], x, y, radius)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(radius) and radius > 0):
@@ -120,6 +137,8 @@ def refine_on_boundary(proposal: Candidate, boundary_x: np.ndarray,
         return None
     xs = xs[near_columns] - x  # relative to the proposal's centre
     ys = ys[near_columns] - y
+    # (their Kasa rows made once: a round only selects the pixels near its circle)
+    rows = kasa_rows(xs, ys)
     centre_x = centre_y = 0.0
     for tolerance_ratio, tolerance_floor in REFINE_ROUNDS:
         tolerance = max(tolerance_floor, tolerance_ratio * radius)
@@ -128,15 +147,14 @@ def refine_on_boundary(proposal: Candidate, boundary_x: np.ndarray,
         near = (squared > max(0.0, radius - tolerance) ** 2) & (squared < (radius + tolerance) ** 2)
         if np.count_nonzero(near) < 6:
             return None
-        fitted = fit_circle(dx[near], dy[near])
+        fitted = kasa_circle(rows[:, near])
         if fitted is None:
             return None
-        shift_x, shift_y, new_radius = fitted
+        new_x, new_y, new_radius = fitted
         if not (0.6 * radius <= new_radius <= 1.6 * radius):
             return None
-        centre_x, centre_y = centre_x + shift_x, centre_y + shift_y
-        moved = abs(shift_x) + abs(shift_y) + abs(new_radius - radius)
-        radius = new_radius
+        moved = abs(new_x - centre_x) + abs(new_y - centre_y) + abs(new_radius - radius)
+        centre_x, centre_y, radius = new_x, new_y, new_radius
         if moved < 0.05 and tolerance_ratio <= REFINE_ROUNDS[1][0]:
             break  # converged
     # Boundary pixels are the mask's outermost pixels, half a pixel inside its true edge.

@@ -346,7 +346,8 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
             fitted = robust_circle(px, py, x, y, radius, rounds, geometric=not wide)
             if fitted is None:
                 continue
-            keep = np.flatnonzero(good)[fitted[3]]
+            good_rays = np.flatnonzero(good)
+            keep = good_rays[fitted[3]]
             if (not seen_all_round(ray_directions[:, keep], in_view, one_sided)
                     or not 0.5 * radius < fitted[2] < 2.0 * radius + 2):
                 continue  # the edge seen on too few rays, or on one side only
@@ -361,9 +362,8 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
                 sigma = median(edge_widths(gradient, contrast[keep], rays[keep], index[keep], step))
             elif reusable:
                 # (their widths are measured only for the hypothesis chosen, see below)
-                found_edges = np.flatnonzero(good)
-                edges = (px, py, (contrast[found_edges], rays[found_edges], index[found_edges]),
-                         ray_directions[:, found_edges])
+                edges = (px, py, (contrast[good_rays], rays[good_rays], index[good_rays]),
+                         ray_directions[:, good_rays])
             fits.append((fitted[:3], keep.size, spread, sigma, edges))
         # The hypothesis most rays agree on; among about equally good ones the larger circle
         # (the outline is the outermost circle; shading edges inside a small ball fit too).

@@ -5,8 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from balltrack.services.detector.fit import (fit_circle, geometric_circle, refine_on_boundary,
-                                             robust_circle)
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from balltrack.services.detector.fit import (fit_circle, geometric_circle, kasa_circle, kasa_rows,
+                                             refine_on_boundary, robust_circle)
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.proposals import boundary_points
 
@@ -34,6 +37,29 @@ def test_fit_circle_of_degenerate_points_is_none():
     line = np.linspace(-5, 5, 20)
     assert fit_circle(line, 2 * line) is None          # collinear
     assert fit_circle(np.zeros(10), np.zeros(10)) is None  # one point
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(-30, 30), st.floats(-30, 30))
+def test_a_kasa_circle_is_the_same_from_any_origin(seed, origin_x, origin_y):
+    # robust_circle and refine_on_boundary fit every round's points from the first round's
+    # origin (their Kasa rows made once): the circle must not depend on the origin.
+    generator = np.random.default_rng(seed)
+    count = int(generator.integers(8, 80))
+    angles = generator.uniform(0, 2 * math.pi, count)
+    radius = generator.uniform(2, 200)
+    px = 5.0 + radius * np.cos(angles) + generator.normal(0, 0.5, count)
+    py = -3.0 + radius * np.sin(angles) + generator.normal(0, 0.5, count)
+    keep = generator.random(count) < 0.8
+    keep[:8] = True
+    direct = fit_circle(px[keep], py[keep])
+    moved = kasa_circle(kasa_rows(px - origin_x, py - origin_y)[:, keep])
+    assert (direct is None) == (moved is None)
+    if direct is not None:
+        tolerance = 1e-9 * (radius + 50)
+        assert moved[0] + origin_x == pytest.approx(direct[0], abs=tolerance)
+        assert moved[1] + origin_y == pytest.approx(direct[1], abs=tolerance)
+        assert moved[2] == pytest.approx(direct[2], abs=tolerance)
 
 
 def test_geometric_circle_converges_from_a_rough_start():
