@@ -1,6 +1,6 @@
 """Simulator service: the MuJoCo world as camera, robot base and referee (the paper's Gazebo).
 
-Publishes every frame: ``camera/image_raw`` (Image, ``encoding`` rgb8 by default; header stamp =
+Publishes every frame: ``camera/image_raw`` (Image, ``encoding`` bgr8 by default; header stamp =
 simulated time, seq = frame index, frame_id "camera"), ``sim/ground_truth`` (GroundTruth, same
 header), ``clock`` (Clock); ``camera/camera_info`` (CameraInfo) once per simulated second.
 Subscribes: ``cmd_vel`` (Twist: linear[0] m/s, angular[2] rad/s, applied before the next step;
@@ -47,7 +47,7 @@ LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_com
 
 
 def image_message(rgb, head: dict, config: SimulatorConfig) -> dict:
-    """The Image message of a rendered RGB frame (rgb8 needs no conversion at all)."""
+    """The Image message of a rendered RGB frame in the configured encoding."""
     if config.encoding == "rgb8":
         return {"header": head, "width": rgb.shape[1], "height": rgb.shape[0], "encoding": "rgb8",
                 "data": rgb.tobytes()}
@@ -171,6 +171,9 @@ def build(service: ServiceContext):
             truth = simulation.ground_truth()
             if recorder is not None:
                 recorder.write(simulation, rgb, truth)
+        # The frame's message is made before the wait for its delivery time, as a camera
+        # converts its frame before it delivers it: none of it is on the frame's way.
+        image = image_message(rgb, head, config) if config.publish_images else None
         work.add(time.perf_counter() - started_work)
         if config.pacing == "realtime":
             slips = pacer.slips
@@ -179,8 +182,8 @@ def build(service: ServiceContext):
             service.stats.count("dropped", pacer.slips - slips)
         else:
             pacer.reset()
-        if config.publish_images:
-            images.put(image_message(rgb, head, config))
+        if image is not None:
+            images.put(image)
         truths.put({"header": head, **truth})
         if now + 1e-6 >= next_info:  # (the core sums time steps: 0.99999... is 1 s)
             infos.put(camera_info())
@@ -188,7 +191,7 @@ def build(service: ServiceContext):
         # Lockstep: time moves on once the detector has answered this frame, and, on the
         # frames whose clock makes the follower's timer fire, once its command is applied.
         lockstep = config.pacing == "lockstep"
-        if lockstep and config.publish_images and gate.alive("detector"):
+        if lockstep and image is not None and gate.alive("detector"):
             gate.wait_answer(head["seq"], config.lockstep_timeout)
         if service.stop.is_set():
             return next_info

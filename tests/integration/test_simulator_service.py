@@ -74,7 +74,7 @@ def test_frames_camera_info_and_ground_truth_agree(session, start_simulator):
     last = images.wait_count(30, 20)[29]
     frames = {image["header"]["seq"]: image for image in images.messages}
     for image in images.messages[:30]:
-        assert (image["width"], image["height"], image["encoding"]) == (160, 120, "rgb8")
+        assert (image["width"], image["height"], image["encoding"]) == (160, 120, "bgr8")
         assert image["header"]["frame_id"] == "camera"
         assert abs(image["header"]["stamp"] - image["header"]["seq"] * PERIOD * 1e9) < 1000
     assert sorted(frames)[:30] == list(range(1, 31)), "frames lost or out of order"
@@ -91,7 +91,7 @@ def test_frames_camera_info_and_ground_truth_agree(session, start_simulator):
     x, y, z = truth["balls"][0]["in_camera"]
     info = replies[0]
     u, v = info["cx"] + info["fx"] * x / z, info["cy"] + info["fy"] * y / z
-    red, green, blue = np.frombuffer(image["data"], np.uint8).reshape(120, 160, 3)[round(v), round(u)]
+    blue, green, red = np.frombuffer(image["data"], np.uint8).reshape(120, 160, 3)[round(v), round(u)]
     assert truth["balls"][0]["visible"] and green > 150 and blue < 90, (u, v, red, green, blue)
 
 
