@@ -166,6 +166,7 @@ def run(options) -> "ExperimentResult":
         if photos is not None and (frames := photo_frames(photos)):
             sets["photos"] = frames
         repeats = 60 if options.quick else 300
+        passes = 1 if options.quick else 3
         rows, breakdowns = [], {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats)
@@ -181,7 +182,7 @@ def run(options) -> "ExperimentResult":
             rows.append([name, len(frames),
                          f"{plain:.2f} / {measured['plain']['wall_p90_ms']:.2f}",
                          f"{ours:.2f} / {measured['balltrack']['wall_p90_ms']:.2f}", f"{speedup:.2f}"])
-            breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, 1 if options.quick else 3)
+            breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
             for stage, times in breakdowns[name].items():
                 result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
                 result.figure(f"{name}/stage/{stage}/middle_ms", times["middle"])
@@ -191,10 +192,10 @@ def run(options) -> "ExperimentResult":
                      "OpenCV on one thread:")
         result.table(["stage", *(f"{name}: {group}" for name in breakdowns
                                  for group in ("all frames", "middle fifth"))], breakdown_rows(breakdowns),
-                     "Where the balltrack detector's time goes, ms per frame (the detector alone, 3 "
-                     "passes over the frames, each frame's median call; middle fifth = the frames "
-                     "nearest its median, which the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, acceptance = 7, "
-                     "outline = 8-9 (see services/detector/detector.py):")
+                     f"Where the balltrack detector's time goes, ms per frame (the detector alone, {passes} pass{'es' if passes > 1 else ''} "
+                     "over the frames, each frame's median call; middle fifth = the frames "
+                     "nearest its median, which the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, "
+                     "acceptance = 7, outline = 8-9 (see services/detector/detector.py):")
         result.settings = {"photos": str(photos) if "photos" in sets else "none",
                            "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}
     finally:
