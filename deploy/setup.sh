@@ -7,7 +7,8 @@
 #      with apt-get only when missing (sudo when not root);
 #   2. a virtual environment .venv at the repository root (Python >= 3.11);
 #   3. pip install -e '.[test]' into it, again only when pyproject.toml changed since the last
-#      install or a dependency cannot be found.
+#      install or a dependency cannot be found;
+#   4. the detector's compiled functions compiled into numba's cache (services/detector/jit.py).
 #
 # Environment: PYTHON=/path/to/python3.11 chooses the interpreter for a new .venv.
 set -euo pipefail
@@ -76,7 +77,7 @@ installed="$(cat "$STAMP" 2>/dev/null || true)"
 importable() {
     .venv/bin/python - <<'PY' 2>/dev/null
 import importlib.util, sys
-modules = ("zenoh", "cv2", "numpy", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest",
+modules = ("zenoh", "cv2", "numpy", "numba", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest",
            "pytest_timeout", "hypothesis", "importlinter", "balltrack.common", "balltrack.services", "balltrack.deploy")
 sys.exit(any(importlib.util.find_spec(name) is None for name in modules))
 PY
@@ -86,3 +87,14 @@ if [ "$installed" != "$wanted" ] || ! importable; then
     .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
     echo "$wanted" > "$STAMP"
 fi
+
+# -- 4. the detector's compiled functions ----------------------------------------------------
+# Compiled here (~9 s) so that neither a service's first frame nor a test waits for numba;
+# from numba's cache beside the sources (after the first run) this takes about a second.
+.venv/bin/python - <<'PY'
+import sys
+from balltrack.services.detector.detector import compile_kernels
+seconds = compile_kernels()
+if seconds > 3:
+    print(f"setup: compiled the detector's kernels in {seconds:.0f} s", file=sys.stderr)
+PY

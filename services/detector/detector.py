@@ -368,3 +368,17 @@ def without_contained(measured: list[Measured]) -> list[Measured]:
     return [(candidate, metrics) for candidate, metrics in measured
             if not any(outer.radius >= CONTAINED_RATIO * candidate.radius
                        and circle_overlap(candidate, outer) >= 0.5 for outer in passing)]
+
+
+def compile_kernels() -> float:
+    """Compile the detector's compiled functions (see ``jit.py``), or load them from numba's
+    cache, by detecting balls in a drawn frame: one ball alone and two touching take every
+    compiled path a frame takes. Returns the seconds it took (~9 s compiling, ~0.3 s from
+    the cache on this project's 2-core machines). A service calls it before its first frame
+    and ``deploy/setup.sh`` once per install, so that no frame waits for the compiler."""
+    started = time.perf_counter()
+    frame = np.full((240, 320, 3), (70, 80, 90), np.uint8)
+    for centre, radius in (((150, 120), 30), ((235, 130), 18), ((262, 130), 18)):
+        cv2.circle(frame, centre, radius, (40, 200, 180), -1, cv2.LINE_AA)
+    BallDetector().detect(frame)
+    return time.perf_counter() - started

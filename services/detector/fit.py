@@ -2,6 +2,10 @@
 
 ``refine_on_boundary`` is step 6's refinement of a proposal on the colour mask's boundary
 pixels; ``robust_circle`` is the outline search's fit (``outline.py``).
+
+The fits are compiled (see ``jit.py``): each runs in rounds over a few dozen to a few hundred
+points, several times per ball, where numpy's overhead per call was most of their time
+(~0.12 ms per outline fit in numpy on this project's machines, ~0.02 ms compiled).
 """
 
 import math
@@ -9,83 +13,130 @@ import math
 import numpy as np
 
 from balltrack.services.detector.geometry import Candidate
+from balltrack.services.detector.jit import compiled
 
 # Circle refinement: (tolerance over radius, tolerance floor in pixels) of each fitting round.
 REFINE_ROUNDS = ((0.35, 2.0), (0.2, 1.5), (0.12, 1.2))
 
 
-def solve_symmetric(matrix: tuple[float, float, float, float, float, float],
-                    right: tuple[float, float, float]) -> tuple[float, float, float] | None:
-    """The solution of a symmetric 3x3 system by Cramer's rule, None when it is singular.
-    ``matrix``: its entries (m00, m01, m02, m11, m12, m22). (np.linalg.solve costs more than
-    the fits that call this.)"""
-    m00, m01, m02, m11, m12, m22 = matrix
-    t0, t1, t2 = right
+@compiled
+def solve_symmetric(m00, m01, m02, m11, m12, m22, t0, t1, t2):
+    """The solution (ok, a, b, c) of the symmetric 3x3 system (m00 m01 m02; m01 m11 m12;
+    m02 m12 m22) (a b c) = (t0 t1 t2) by Cramer's rule; ok False when it is singular."""
     c00, c01, c02 = m11 * m22 - m12 * m12, m02 * m12 - m01 * m22, m01 * m12 - m02 * m11
     determinant = m00 * c00 + m01 * c01 + m02 * c02
     if abs(determinant) < 1e-9:
-        return None
+        return False, 0.0, 0.0, 0.0
     c11, c12, c22 = m00 * m22 - m02 * m02, m01 * m02 - m00 * m12, m00 * m11 - m01 * m01
-    return ((c00 * t0 + c01 * t1 + c02 * t2) / determinant,
+    return (True, (c00 * t0 + c01 * t1 + c02 * t2) / determinant,
             (c01 * t0 + c11 * t1 + c12 * t2) / determinant,
             (c02 * t0 + c12 * t1 + c22 * t2) / determinant)
+
+
+@compiled
+def least_squares(first, second, target, keep):
+    """The least-squares (a, b, c) of target = a first + b second + c over the points where
+    ``keep``, from its normal equations: (ok, a, b, c), ok False when they are singular."""
+    m00 = m01 = m02 = m11 = m12 = m22 = t0 = t1 = t2 = 0.0
+    for i in range(first.size):
+        if keep[i]:
+            u, v, w = first[i], second[i], target[i]
+            m00 += u * u
+            m01 += u * v
+            m02 += u
+            m11 += v * v
+            m12 += v
+            m22 += 1.0
+            t0 += u * w
+            t1 += v * w
+            t2 += w
+    return solve_symmetric(m00, m01, m02, m11, m12, m22, t0, t1, t2)
+
+
+@compiled
+def kasa(dx, dy, keep):
+    """Algebraic (Kasa) least-squares circle through the points (``dx``, ``dy``) where
+    ``keep``: (ok, centre x, centre y, radius), the centre relative to the points' origin.
+    A Kasa circle is the same from any origin, so rounds of a fit select points by ``keep``
+    instead of moving them to each round's centre."""
+    # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
+    ok, a, b, c = least_squares(dx, dy, dx * dx + dy * dy, keep)
+    if not ok:
+        return False, 0.0, 0.0, 0.0
+    centre_x, centre_y = a / 2.0, b / 2.0
+    radius_squared = c + centre_x * centre_x + centre_y * centre_y
+    if not math.isfinite(radius_squared) or radius_squared <= 0:
+        return False, 0.0, 0.0, 0.0
+    return True, centre_x, centre_y, math.sqrt(radius_squared)
 
 
 def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | None:
     """Algebraic (Kasa) least-squares circle through points given relative to a point near
     their centre: returns its centre (relative to the same point) and radius, or None."""
-    return kasa_circle(kasa_rows(dx, dy))
+    dx, dy = np.asarray(dx, np.float64), np.asarray(dy, np.float64)
+    ok, centre_x, centre_y, radius = kasa(dx, dy, np.ones(dx.size, np.bool_))
+    return (centre_x, centre_y, radius) if ok else None
 
 
-def kasa_rows(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """The rows (dx, dy, 1, dx^2 + dy^2) of points' Kasa fit (see kasa_circle)."""
-    rows = np.empty((4, dx.size))
-    rows[0], rows[1], rows[2] = dx, dy, 1.0
-    np.multiply(dx, dx, out=rows[3])
-    rows[3] += dy * dy
-    return rows
-
-
-def kasa_circle(rows: np.ndarray) -> tuple[float, float, float] | None:
-    """The Kasa circle of points (their ``kasa_rows``, or some of their columns): centre
-    relative to the points' origin and radius, or None."""
-    # dx^2 + dy^2 = a dx + b dy + c  ->  centre (a/2, b/2), radius^2 = c + (a^2 + b^2) / 4
-    # (the normal equations' sums as one matrix product: one by one they cost more in calls)
-    (m00, m01, m02, t0), (_, m11, m12, t1), (_, _, m22, t2), _ = (rows @ rows.T).tolist()
-    solved = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
-    if solved is None:
-        return None
-    a, b, c = solved
-    centre_x, centre_y = a / 2.0, b / 2.0
-    radius_squared = c + centre_x * centre_x + centre_y * centre_y
-    if not math.isfinite(radius_squared) or radius_squared <= 0:
-        return None
-    return centre_x, centre_y, math.sqrt(radius_squared)
-
-
-def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
-                     iterations: int = 3) -> tuple[float, float, float]:
-    """Gauss-Newton refinement of a circle on the geometric distances of points to it."""
+@compiled
+def geometric_steps(px, py, keep, x, y, radius, iterations):
+    """Gauss-Newton refinement of a circle on the geometric distances to it of the points
+    where ``keep``."""
     for _ in range(iterations):
+        # the least-squares step of the Jacobian (-ux, -uy, -1) against the residuals
         dx, dy = px - x, py - y
         distance = np.maximum(np.hypot(dx, dy), 1e-9)
-        # normal equations of the Jacobian (-ux, -uy, -1) and the residuals, as one product
-        rows = np.empty((4, dx.size))
-        np.divide(dx, distance, out=rows[0])
-        np.divide(dy, distance, out=rows[1])
-        rows[2] = 1.0
-        np.subtract(distance, radius, out=rows[3])
-        (m00, m01, m02, t0), (_, m11, m12, t1), (_, _, m22, t2), _ = (rows @ rows.T).tolist()
-        delta = solve_symmetric((m00, m01, m02, m11, m12, m22), (t0, t1, t2))
-        if delta is None:
-            break
-        shift_x, shift_y, growth = delta
-        if not (math.isfinite(shift_x) and math.isfinite(shift_y) and math.isfinite(growth)):
+        ok, shift_x, shift_y, growth = least_squares(dx / distance, dy / distance, distance - radius,
+                                                     keep)
+        if not (ok and math.isfinite(shift_x) and math.isfinite(shift_y) and math.isfinite(growth)):
             break
         x, y, radius = x + shift_x, y + shift_y, radius + growth
         if abs(shift_x) + abs(shift_y) + abs(growth) < 1e-3:
             break
     return x, y, radius
+
+
+def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
+                     iterations: int = 3) -> tuple[float, float, float]:
+    """Gauss-Newton refinement of a circle on the geometric distances of points to it."""
+    px, py = np.asarray(px, np.float64), np.asarray(py, np.float64)
+    return geometric_steps(px, py, np.ones(px.size, np.bool_), float(x), float(y), float(radius),
+                           iterations)
+
+
+@compiled
+def robust_rounds(px, py, x, y, radius, rounds, geometric):
+    """robust_circle's rounds (``rounds``: rows of tolerance over radius, floor in px):
+    (ok, x, y, radius, which points lie on the circle)."""
+    count = px.size
+    dx, dy = px - x, py - y
+    keep = np.zeros(count, np.bool_)
+    centre_x = centre_y = 0.0
+    for round_index in range(rounds.shape[0]):
+        tolerance = max(rounds[round_index, 1], rounds[round_index, 0] * radius)
+        kept = 0
+        for i in range(count):
+            keep[i] = abs(math.hypot(dx[i] - centre_x, dy[i] - centre_y) - radius) < tolerance
+            kept += keep[i]
+        if kept < 8:
+            return False, x, y, radius, keep
+        ok, centre_x, centre_y, radius = kasa(dx, dy, keep)
+        if not ok:
+            return False, x, y, radius, keep
+    x, y = x + centre_x, y + centre_y
+    if geometric:
+        x, y, radius = geometric_steps(px, py, keep, x, y, radius, 3)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(radius) and radius > 0):
+            return False, x, y, radius, keep
+    last = rounds.shape[0] - 1
+    tolerance = max(rounds[last, 1], rounds[last, 0] * radius)
+    on_circle = np.empty(count, np.bool_)
+    for i in range(count):
+        on_circle[i] = abs(math.hypot(px[i] - x, py[i] - y) - radius) < tolerance
+    return True, x, y, radius, on_circle
+
+
+_ROUND_ARRAYS: dict[tuple, np.ndarray] = {}
 
 
 def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
@@ -96,27 +147,45 @@ def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: fl
     ``rounds``: (tolerance over radius, tolerance floor in pixels) per round. None when fewer
     than 8 points are within a round's tolerance or a fit is degenerate.
     """
-    # The points relative to the first centre and their Kasa rows, made once: a round only
-    # selects the points near its circle (a Kasa circle is the same from any origin).
-    dx, dy = px - x, py - y
-    rows = kasa_rows(dx, dy)
+    table = _ROUND_ARRAYS.get(rounds)
+    if table is None:  # (the few round tables are constants: made into arrays once)
+        table = _ROUND_ARRAYS[rounds] = np.array(rounds, np.float64).reshape(-1, 2)
+    ok, x, y, radius, on_circle = robust_rounds(
+        np.asarray(px, np.float64), np.asarray(py, np.float64), float(x), float(y), float(radius),
+        table, bool(geometric))
+    return (x, y, radius, on_circle) if ok else None
+
+
+@compiled
+def refine_rounds(xs, ys, radius, rounds):
+    """refine_on_boundary's rounds on the pixels (``xs``, ``ys``, relative to the proposal's
+    centre): (ok, centre x, centre y, radius)."""
+    count = xs.size
+    near = np.zeros(count, np.bool_)
     centre_x = centre_y = 0.0
-    for tolerance_ratio, tolerance_floor in rounds:
-        keep = (np.abs(np.hypot(dx - centre_x, dy - centre_y) - radius)
-                < max(tolerance_floor, tolerance_ratio * radius))
-        if np.count_nonzero(keep) < 8:
-            return None
-        fitted = kasa_circle(rows[:, keep])
-        if fitted is None:
-            return None
-        centre_x, centre_y, radius = fitted
-    x, y = x + centre_x, y + centre_y
-    if geometric:
-        x, y, radius = geometric_circle(px[keep], py[keep], x, y, radius)
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(radius) and radius > 0):
-            return None
-    residual = np.hypot(px - x, py - y) - radius
-    return x, y, radius, np.abs(residual) < max(rounds[-1][1], rounds[-1][0] * radius)
+    for round_index in range(rounds.shape[0]):
+        tolerance_ratio = rounds[round_index, 0]
+        tolerance = max(rounds[round_index, 1], tolerance_ratio * radius)
+        inner, outer = max(0.0, radius - tolerance) ** 2, (radius + tolerance) ** 2
+        kept = 0
+        for i in range(count):
+            dx, dy = xs[i] - centre_x, ys[i] - centre_y
+            squared = dx * dx + dy * dy
+            near[i] = inner < squared < outer
+            kept += near[i]
+        if kept < 6:
+            return False, 0.0, 0.0, 0.0
+        ok, new_x, new_y, new_radius = kasa(xs, ys, near)
+        if not ok or not (0.6 * radius <= new_radius <= 1.6 * radius):
+            return False, 0.0, 0.0, 0.0
+        moved = abs(new_x - centre_x) + abs(new_y - centre_y) + abs(new_radius - radius)
+        centre_x, centre_y, radius = new_x, new_y, new_radius
+        if moved < 0.05 and tolerance_ratio <= rounds[1, 0]:
+            break  # converged
+    return True, centre_x, centre_y, radius
+
+
+_REFINE_TABLE = np.array(REFINE_ROUNDS, np.float64)
 
 
 def refine_on_boundary(proposal: Candidate, boundary_x: np.ndarray,
@@ -135,27 +204,10 @@ def refine_on_boundary(proposal: Candidate, boundary_x: np.ndarray,
     near_columns = (xs > x - reach) & (xs < x + reach)
     if np.count_nonzero(near_columns) < 6:
         return None
-    xs = xs[near_columns] - x  # relative to the proposal's centre
-    ys = ys[near_columns] - y
-    # (their Kasa rows made once: a round only selects the pixels near its circle)
-    rows = kasa_rows(xs, ys)
-    centre_x = centre_y = 0.0
-    for tolerance_ratio, tolerance_floor in REFINE_ROUNDS:
-        tolerance = max(tolerance_floor, tolerance_ratio * radius)
-        dx, dy = xs - centre_x, ys - centre_y
-        squared = dx * dx + dy * dy
-        near = (squared > max(0.0, radius - tolerance) ** 2) & (squared < (radius + tolerance) ** 2)
-        if np.count_nonzero(near) < 6:
-            return None
-        fitted = kasa_circle(rows[:, near])
-        if fitted is None:
-            return None
-        new_x, new_y, new_radius = fitted
-        if not (0.6 * radius <= new_radius <= 1.6 * radius):
-            return None
-        moved = abs(new_x - centre_x) + abs(new_y - centre_y) + abs(new_radius - radius)
-        centre_x, centre_y, radius = new_x, new_y, new_radius
-        if moved < 0.05 and tolerance_ratio <= REFINE_ROUNDS[1][0]:
-            break  # converged
+    ok, centre_x, centre_y, radius = refine_rounds(
+        (xs[near_columns] - x).astype(np.float64), (ys[near_columns] - y).astype(np.float64),
+        float(radius), _REFINE_TABLE)
+    if not ok:
+        return None
     # Boundary pixels are the mask's outermost pixels, half a pixel inside its true edge.
     return Candidate(x + centre_x, y + centre_y, radius + 0.5)

@@ -5,7 +5,7 @@ from the centre, the colour edge at its 50 % crossing, then a robust circle fit.
 mask's edge lies where blur has spread the colour (radii 0.5-1 px too large whatever the size,
 the more blurred the frame the more), and a strongly shaded side drags its centre towards the
 lit side; the 50 % crossing of the edge does not move with blur, and edges of shading are told
-from the outline (see ``shading``).
+from the outline (see ``is_shading``).
 """
 
 import math
@@ -15,6 +15,7 @@ import numpy as np
 
 from balltrack.services.detector.fit import robust_circle
 from balltrack.services.detector.geometry import Candidate, box_around, disc, rim_directions
+from balltrack.services.detector.jit import compiled
 
 # Silhouette refinement of accepted balls (radial edge profiles of the frame itself):
 # sample spacing along a ray (px); an edge is a local maximum of the colour gradient along the
@@ -114,40 +115,123 @@ def allowed_samples(shape: tuple[int, ...], x: float, y: float, radii: np.ndarra
             & (radii[None, :] <= np.minimum(stop, leave - margin)[:, None]))
 
 
-def edge_peaks(profiles: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@compiled
+def sorted_median(values):
+    """The median of a 1-D float32 array without NaNs, as ``median`` takes it (the mean of
+    the two middle values in the array's own type)."""
+    ordered = np.sort(values)
+    middle = ordered.size // 2
+    if ordered.size % 2:
+        return ordered[middle]
+    return (ordered[middle - 1] + ordered[middle]) / np.float32(2.0)
+
+
+@compiled
+def edge_peaks(profiles, allowed):
     """Significant colour-gradient peaks along each ray (rays x samples, only where
     ``allowed``), whether each ray sees an edge at all, and the gradient (per sample step)."""
-    rays, count = profiles.shape[:2]
-    difference = profiles[:, 2:] - profiles[:, :-2]
+    rays, count = profiles.shape[0], profiles.shape[1]
     gradient = np.zeros((rays, count), np.float32)
-    np.sqrt(np.einsum("ijk,ijk->ij", difference, difference), out=gradient[:, 1:-1])
-    # (the gradient is finite and not negative: multiplying by False gives exactly 0)
-    gradient *= allowed
-    # (the reductions themselves: their ndarray methods' wrappers cost more on a few rays)
-    strongest = np.maximum.reduce(gradient, axis=1)
-    floor = EDGE_FLOOR * median(strongest) if rays else 0.0
-    peak = np.zeros((rays, count), bool)
-    middle = gradient[:, 1:-1]
-    peak[:, 1:-1] = ((middle >= gradient[:, :-2]) & (middle >= gradient[:, 2:])
-                     & (middle >= EDGE_SIGNIFICANT * strongest[:, None]))
-    return peak, np.logical_or.reduce(peak, axis=1) & (strongest > max(floor, 1e-3)), gradient
+    strongest = np.zeros(rays, np.float32)
+    for ray in range(rays):
+        for sample in range(1, count - 1):
+            if allowed[ray, sample]:
+                blue = profiles[ray, sample + 1, 0] - profiles[ray, sample - 1, 0]
+                green = profiles[ray, sample + 1, 1] - profiles[ray, sample - 1, 1]
+                red = profiles[ray, sample + 1, 2] - profiles[ray, sample - 1, 2]
+                value = np.sqrt(blue * blue + green * green + red * red)
+                gradient[ray, sample] = value
+                strongest[ray] = max(strongest[ray], value)
+    floor = EDGE_FLOOR * np.float64(sorted_median(strongest)) if rays else 0.0
+    floor = np.float32(max(floor, 1e-3))
+    significant = np.float32(EDGE_SIGNIFICANT)
+    peak = np.zeros((rays, count), np.bool_)
+    has_edge = np.zeros(rays, np.bool_)
+    for ray in range(rays):
+        least = significant * strongest[ray]
+        for sample in range(1, count - 1):
+            value = gradient[ray, sample]
+            if value >= gradient[ray, sample - 1] and value >= gradient[ray, sample + 1] and value >= least:
+                peak[ray, sample] = True
+                has_edge[ray] = True
+        has_edge[ray] = has_edge[ray] and strongest[ray] > floor
+    return peak, has_edge, gradient
 
 
-def shading(profiles: np.ndarray, rays: np.ndarray, index: np.ndarray, colour: np.ndarray,
-            half: int, quantum: float, dark: float) -> np.ndarray:
-    """Whether edges (at ``index`` along ``rays``) are shading rather than an outline: going
+@compiled
+def is_shading(profiles, ray, index, colour, colour_norm, half, quantum, dark):
+    """Whether the edge at ``index`` along ``ray`` is shading rather than an outline: going
     outwards the colour darkens into a darker version of the ball's ``colour`` (within
-    ``quantum``, the frame's rounding step) or into near black (below ``dark``)."""
+    ``quantum``, the frame's rounding step) or into near black (below ``dark``).
+    ``colour_norm``: max(colour . colour, 1e-6)."""
     count = profiles.shape[1]
-    inner = profiles[rays, np.maximum(index - half, 0)]
-    outer = profiles[rays, np.minimum(index + half, count - 1)]
-    brightness_in = np.sqrt(np.add.reduce(inner * inner, axis=1))
-    brightness_out = np.sqrt(np.add.reduce(outer * outer, axis=1))
-    share = (outer @ colour) / max(float(colour @ colour), 1e-6)
-    off_axis = outer - share[:, None] * colour
-    off_axis = np.sqrt(np.add.reduce(off_axis * off_axis, axis=1))
-    ball_like = (share < SHADING_SHARE) & (off_axis <= SHADING_TOLERANCE * brightness_out + quantum)
-    return (brightness_out < brightness_in) & (ball_like | (brightness_out < dark))
+    inner, outer = profiles[ray, max(index - half, 0)], profiles[ray, min(index + half, count - 1)]
+    brightness_in = np.sqrt(inner[0] * inner[0] + inner[1] * inner[1] + inner[2] * inner[2])
+    brightness_out = np.sqrt(outer[0] * outer[0] + outer[1] * outer[1] + outer[2] * outer[2])
+    share = (outer[0] * colour[0] + outer[1] * colour[1] + outer[2] * colour[2]) / colour_norm
+    blue = outer[0] - share * colour[0]
+    green = outer[1] - share * colour[1]
+    red = outer[2] - share * colour[2]
+    off_axis = np.sqrt(blue * blue + green * green + red * red)
+    ball_like = (share < np.float32(SHADING_SHARE)
+                 and off_axis <= np.float32(SHADING_TOLERANCE) * brightness_out + quantum)
+    return brightness_out < brightness_in and (ball_like or brightness_out < dark)
+
+
+@compiled
+def outline_edges(profiles, peak, colour, half, quantum, dark):
+    """Per ray, a wide round's two outline hypotheses: its first edge that is not shading
+    (index, and whether there is one) and its outermost edge (see ``silhouette``)."""
+    rays, count = peak.shape
+    colour_norm = np.float32(max(np.float64(colour[0] * colour[0] + colour[1] * colour[1]
+                                            + colour[2] * colour[2]), 1e-6))
+    first = np.zeros(rays, np.int64)
+    found = np.zeros(rays, np.bool_)
+    outermost = np.full(rays, count - 1, np.int64)
+    for ray in range(rays):
+        last = -1
+        for sample in range(count):
+            if peak[ray, sample]:
+                last = sample
+                if not found[ray] and not is_shading(profiles, ray, sample, colour, colour_norm, half,
+                                                     np.float32(quantum), np.float32(dark)):
+                    first[ray], found[ray] = sample, True
+        if last >= 0:
+            outermost[ray] = last
+    return first, found, outermost
+
+
+@compiled
+def crossing_edges(profiles, index, half, rays):
+    """``crossings`` of the edges at ``index`` along ``rays``."""
+    count, width = profiles.shape[1], 2 * half + 1
+    position = np.empty(rays.size)
+    defined = np.empty(rays.size, np.bool_)
+    contrast = np.empty(rays.size, np.float32)
+    share = np.empty(width, np.float32)
+    for edge in range(rays.size):
+        ray = rays[edge]
+        inner = profiles[ray, min(max(index[edge] - half, 0), count - 1)]
+        outer = profiles[ray, min(max(index[edge] + half, 0), count - 1)]
+        blue, green, red = inner[0] - outer[0], inner[1] - outer[1], inner[2] - outer[2]
+        norm = blue * blue + green * green + red * red
+        scale = max(norm, np.float32(1e-9))
+        last = width - 1  # (no sample above half way: only when the contrast is nil)
+        above = False
+        for offset in range(width):
+            level = profiles[ray, min(max(index[edge] - half + offset, 0), count - 1)]
+            share[offset] = ((level[0] - outer[0]) * blue + (level[1] - outer[1]) * green
+                             + (level[2] - outer[2]) * red) / scale
+            if share[offset] >= np.float32(0.5):
+                last, above = offset, True
+        # the outermost sample still at least half way to the inside level, and the next one
+        last = min(last, width - 2)
+        drop = share[last] - share[last + 1]
+        fraction = (share[last] - np.float32(0.5)) / max(drop, np.float32(1e-6)) if drop > np.float32(1e-6) else np.float32(0.0)
+        position[edge] = index[edge] - half + last + min(max(fraction, np.float32(0.0)), np.float32(1.0))
+        defined[edge] = norm > np.float32(1e-6) and not share[width - 1] >= np.float32(0.5)
+        contrast[edge] = np.sqrt(norm)
+    return position, defined, contrast
 
 
 def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
@@ -157,25 +241,8 @@ def crossings(profiles: np.ndarray, index: np.ndarray, half: int,
     whether it is well defined, and the contrast between those levels."""
     if rays is None:
         rays = np.arange(profiles.shape[0])
-    count = profiles.shape[1]
-    offsets = np.arange(-half, half + 1)
-    # (np.minimum/np.maximum: np.clip's wrapper costs more than the clipping of a few dozen rays)
-    window = np.minimum(np.maximum(index[:, None] + offsets[None, :], 0), count - 1)
-    values = profiles[rays[:, None], window]                      # rays x (2 half + 1) x 3
-    level_in, level_out = values[:, 0], values[:, -1]
-    contrast = level_in - level_out
-    norm = np.einsum("ij,ij->i", contrast, contrast)
-    share = np.einsum("ijk,ik->ij", values - level_out[:, None, :], contrast)
-    share /= np.maximum(norm, 1e-9)[:, None]
-    above = share >= 0.5
-    # the outermost sample still at least half way to the inside level, and the next one
-    last = np.minimum(above.shape[1] - 1 - np.argmax(above[:, ::-1], axis=1), above.shape[1] - 2)
-    rows = np.arange(rays.size)
-    s0, s1 = share[rows, last], share[rows, last + 1]
-    drop = s0 - s1
-    fraction = np.where(drop > 1e-6, (s0 - 0.5) / np.maximum(drop, 1e-6), 0.0)
-    position = index + offsets[last] + np.minimum(np.maximum(fraction, 0.0), 1.0)
-    return position, (norm > 1e-6) & ~above[:, -1], np.sqrt(norm)
+    return crossing_edges(np.ascontiguousarray(profiles, np.float32), np.asarray(index, np.int64),
+                          int(half), np.asarray(rays, np.int64))
 
 
 def edge_widths(gradient: np.ndarray, contrast: np.ndarray, rays: np.ndarray, index: np.ndarray,
@@ -302,13 +369,8 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         # its edges may serve the narrow fit (see below).
         reusable = wide and step == RAY_STEP and in_view == samples
         if wide:
-            ray_index, sample_index = np.nonzero(peak)
-            outline = peak.copy()
-            outline[ray_index, sample_index] = ~shading(profiles, ray_index, sample_index, colour,
-                                                         half, gain, dark)
-            first = np.argmax(outline, axis=1)
-            outermost = peak.shape[1] - 1 - np.argmax(peak[:, ::-1], axis=1)
-            choices = [(first, np.logical_or.reduce(outline, axis=1))]
+            first, found, outermost = outline_edges(profiles, peak, colour, half, gain, dark)
+            choices = [(first, found)]
             if np.count_nonzero((first != outermost) & has_edge) >= 0.15 * samples:
                 choices.append((outermost, has_edge))
         else:

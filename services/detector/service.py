@@ -16,7 +16,7 @@ from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector
+from balltrack.services.detector.detector import BallDetector, compile_kernels
 
 
 def ball_fields(detection, width: int, height: int) -> dict:
@@ -30,6 +30,8 @@ def ball_fields(detection, width: int, height: int) -> dict:
 
 
 def build(service: ServiceContext):
+    # Before the first frame (and before the service counts as alive): no frame waits for numba.
+    service.log.info("detector kernels ready in %.1f s", compile_kernels())
     largest = service.publisher(keys.DETECTED_BALL, "Ball2D")
     every = service.publisher(keys.DETECTED_BALLS, "Ball2DArray")
     annotated = service.publisher(keys.IMAGE_OUT, "Image")

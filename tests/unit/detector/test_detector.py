@@ -23,8 +23,9 @@ from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector import fit, outline
 from balltrack.services.detector.detector import (STAGES, BallDetector, Detection, DetectionResult,
-                                                  acceptance_order, without_contained)
+                                                  acceptance_order, compile_kernels, without_contained)
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import EXPLAINED
 from balltrack.services.detector.proposals import fill_holes, frame_search
@@ -63,6 +64,30 @@ def test_finds_one_ball_of_any_size_anywhere(detector, radius, u, v):
 
 def test_finds_a_ball_filling_much_of_the_frame(detector):
     assert_found(detector.detect(scene([(330.0, 260.0, 150.0)])).detections, 330.0, 260.0, 150.0)
+
+
+def compiled_signatures() -> dict[str, set[str]]:
+    """Every compiled function of the detector (see jit.py) and the argument types it has been
+    compiled for."""
+    return {f"{module.__name__}.{name}": set(map(str, function.signatures))
+            for module in (fit, outline) for name, function in vars(module).items()
+            if hasattr(function, "signatures") and function.__module__ == module.__name__}
+
+
+def test_compile_kernels_compiles_what_frames_need():
+    # A service calls compile_kernels before its first frame so that no frame waits for the
+    # compiler: frames of every kind must then need no new compilation.
+    assert compile_kernels() > 0
+    compiled = compiled_signatures()
+    detector = BallDetector(DetectorConfig())
+    frames = [scene([(330.0, 260.0, 30.0), (100.0, 100.0, 12.0)]),
+              scene([(300.0, 240.0, 40.0), (372.0, 240.0, 32.0)]),    # touching
+              scene([(10.0, 200.0, 35.0)], seed=3),                   # cut by the frame's edge
+              scene([(320.0, 240.0, 20.0)], brightness=0.05),         # dark
+              pitch_dark_frame(balls=[(320.0, 300.0, 25.0)])]
+    for frame in frames:
+        detector.detect(frame)
+    assert compiled_signatures() == compiled
 
 
 def test_stage_times_split_a_call_among_the_stages_it_ran():

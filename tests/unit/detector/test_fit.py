@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from balltrack.services.detector.fit import (fit_circle, geometric_circle, kasa_circle, kasa_rows,
-                                             refine_on_boundary, robust_circle)
+from balltrack.services.detector.fit import (fit_circle, geometric_circle, kasa, refine_on_boundary,
+                                             robust_circle)
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.proposals import boundary_points
 
@@ -43,7 +43,8 @@ def test_fit_circle_of_degenerate_points_is_none():
 @given(st.integers(0, 2**32 - 1), st.floats(-30, 30), st.floats(-30, 30))
 def test_a_kasa_circle_is_the_same_from_any_origin(seed, origin_x, origin_y):
     # robust_circle and refine_on_boundary fit every round's points from the first round's
-    # origin (their Kasa rows made once): the circle must not depend on the origin.
+    # origin (a round selects points, it does not move them): the circle must not depend on
+    # the origin.
     generator = np.random.default_rng(seed)
     count = int(generator.integers(8, 80))
     angles = generator.uniform(0, 2 * math.pi, count)
@@ -53,8 +54,8 @@ def test_a_kasa_circle_is_the_same_from_any_origin(seed, origin_x, origin_y):
     keep = generator.random(count) < 0.8
     keep[:8] = True
     direct = fit_circle(px[keep], py[keep])
-    moved = kasa_circle(kasa_rows(px - origin_x, py - origin_y)[:, keep])
-    assert (direct is None) == (moved is None)
+    ok, *moved = kasa(px - origin_x, py - origin_y, keep)
+    assert (direct is None) == (not ok)
     if direct is not None:
         tolerance = 1e-9 * (radius + 50)
         assert moved[0] + origin_x == pytest.approx(direct[0], abs=tolerance)

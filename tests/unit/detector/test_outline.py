@@ -10,7 +10,7 @@ from balltrack.services.detector.geometry import Candidate, rim_directions
 from balltrack.services.detector.mask import ColourMasker
 from balltrack.services.detector import outline
 from balltrack.services.detector.outline import (allowed_samples, crossings, edge_peaks, median,
-                                                 narrow_fit, ray_bounds, ray_profiles, shading,
+                                                 narrow_fit, outline_edges, ray_bounds, ray_profiles,
                                                  silhouette)
 from tests import harness
 from tests.unit.detector.drawing import floor, scene, to_uint8
@@ -88,14 +88,20 @@ def test_crossings_at_half_way_on_a_linear_ramp():
 
 
 def test_shading_is_a_darker_version_of_the_ball_or_black():
+    # A ray's first edge that is not shading is its outline hypothesis; its outermost edge is
+    # the other, whatever the edge is.
     colour = np.array([40.0, 220.0, 190.0], np.float32)
     darker = step_profiles(1, 20, 10, colour, 0.5 * colour)
     floor_grey = step_profiles(1, 20, 10, colour, (100.0, 100.0, 100.0))
     black = step_profiles(1, 20, 10, colour, (1.0, 2.0, 1.0))
     brighter = step_profiles(1, 20, 10, 0.5 * colour, colour)
-    index, rays = np.array([10]), np.array([0])
+    peak = np.zeros((1, 20), bool)
+    peak[0, 10] = True
     for profiles, expected in ((darker, True), (floor_grey, False), (black, True), (brighter, False)):
-        assert shading(profiles, rays, index, colour, half=3, quantum=1.0, dark=8.0)[0] == expected
+        first, found, outermost = outline_edges(profiles, peak, colour, 3, 1.0, 8.0)
+        assert found[0] == (not expected) and outermost[0] == 10
+        if found[0]:
+            assert first[0] == 10
 
 
 @pytest.mark.parametrize("radius", [6.0, 15.0, 40.0])
