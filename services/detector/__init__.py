@@ -2,7 +2,8 @@
 
 ``detector.py`` is the pure core (``BallDetector``), one module per stage: ``mask.py`` (colour
 mask), ``proposals.py`` (blobs and Hough circles), ``fit.py`` (circle fitting), ``checks.py``
-(candidate checks), ``outline.py`` (sub-pixel outline), ``dark.py`` (dark sides);
+(candidate checks), ``outline.py`` (sub-pixel outline, on ``edges.py``'s colour edges along rays),
+``dark.py`` (dark sides); ``jit.py`` marks the functions numba compiles;
 ``geometry.py`` holds the circle helpers they share, ``annotate.py`` draws detections, and
 ``config.py`` holds the parameters. ``service.py`` is the Zenoh service around the core.
 """

@@ -1,7 +1,8 @@
 """Circle fitting: least-squares circles through points, robust to points of other edges.
 
 ``refine_on_boundary`` is step 6's refinement of a proposal on the colour mask's boundary
-pixels; ``robust_circle`` is the outline search's fit (``outline.py``).
+pixels; ``robust_circle`` is the crescent's fit (``highlight.py``) and, as its compiled rounds
+``robust_rounds``, the outline search's (``outline.py``).
 
 The fits are compiled (see ``jit.py``): each runs in rounds over a few dozen to a few hundred
 points, several times per ball, where numpy's overhead per call was most of their time

@@ -23,7 +23,7 @@ from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector import fit, outline
+from balltrack.services.detector import edges, fit, outline
 from balltrack.services.detector.detector import (STAGES, BallDetector, Detection, DetectionResult,
                                                   acceptance_order, compile_kernels, without_contained)
 from balltrack.services.detector.geometry import Candidate
@@ -70,7 +70,7 @@ def compiled_signatures() -> dict[str, set[str]]:
     """Every compiled function of the detector (see jit.py) and the argument types it has been
     compiled for."""
     return {f"{module.__name__}.{name}": set(map(str, function.signatures))
-            for module in (fit, outline) for name, function in vars(module).items()
+            for module in (edges, fit, outline) for name, function in vars(module).items()
             if hasattr(function, "signatures") and function.__module__ == module.__name__}
 
 
