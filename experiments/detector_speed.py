@@ -33,7 +33,7 @@ import numpy as np
 
 from balltrack.experiments.base import machine_speed
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import STAGES, BallDetector
+from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
 
 DEFAULT_PHOTOS = Path("/work/shared/data")
 GOAL_RATIO = 2.0
@@ -161,6 +161,7 @@ def run(options) -> "ExperimentResult":
     try:
         config = options.detector_config()
         detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
+        compile_kernels()  # (as a service does before its first frame: no call waits for numba)
         sets = {"renders": simulator_frames(options.budget(30, 60))}
         photos = options.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
         if photos is not None and (frames := photo_frames(photos)):
@@ -222,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     cv2.setNumThreads(args.threads)
     config = DetectorConfig()
     detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
+    compile_kernels()
     sets = {"simulator renders": simulator_frames(args.frames)}
     photos = None if args.no_photos else args.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
     if photos is not None:
