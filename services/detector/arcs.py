@@ -16,7 +16,7 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.fit import fit_circle
+from balltrack.services.detector.fit import fit_circle, kasa
 from balltrack.services.detector.geometry import Candidate
 
 # A concave point cuts the outline when it lies at least ARC_CUT_DEPTH px (at processing size),
@@ -147,15 +147,14 @@ def arc_circle(piece: np.ndarray) -> tuple[float, float, float] | None:
     if fitted is None:
         return None
     x, y, radius = fitted
-    near = np.ones(len(piece), bool)
     for tolerance in ARC_ROUNDS:
         near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, tolerance * radius)
         if np.count_nonzero(near) < ARC_MIN_POINTS:
             return None
-        fitted = fit_circle(dx[near], dy[near])
-        if fitted is None:
+        # (a round selects its points; a Kasa circle is the same from any origin)
+        ok, x, y, radius = kasa(dx, dy, near)
+        if not ok:
             return None
-        x, y, radius = fitted
     near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, ARC_TOLERANCE * radius)
     if np.count_nonzero(near) < max(ARC_MIN_POINTS, 0.5 * len(piece)):
         return None
