@@ -89,7 +89,7 @@ if [ "$installed" != "$wanted" ] || ! importable; then
 fi
 
 # -- 4. the detector's compiled functions ----------------------------------------------------
-# Compiled here (~9 s) so that neither a service's first frame nor a test waits for numba;
+# Compiled here (10-40 s) so that neither a service's first frame nor a test waits for numba;
 # from numba's cache beside the sources (after the first run) this takes about a second.
 .venv/bin/python - <<'PY'
 import sys

@@ -373,7 +373,7 @@ def without_contained(measured: list[Measured]) -> list[Measured]:
 def compile_kernels() -> float:
     """Compile the detector's compiled functions (see ``jit.py``), or load them from numba's
     cache, by detecting balls in a drawn frame: one ball alone and two touching take every
-    compiled path a frame takes. Returns the seconds it took (~9 s compiling, ~0.3 s from
+    compiled path a frame takes. Returns the seconds it took (10-40 s compiling, ~0.3 s from
     the cache on this project's 2-core machines). A service calls it before its first frame
     and ``deploy/setup.sh`` once per install, so that no frame waits for the compiler."""
     started = time.perf_counter()
