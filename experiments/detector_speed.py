@@ -31,7 +31,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from balltrack.experiments.base import machine_speed
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
 
@@ -148,26 +147,25 @@ def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]]) -> list[l
     return rows
 
 
-def run(options) -> "ExperimentResult":
-    """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
-    photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
+def speed_result(config: DetectorConfig, render_count: int, photos: Path | None, repeats: int,
+                 passes: int, threads: int = 1, quick: bool = False) -> "ExperimentResult":
+    """Both detectors timed side by side on ``render_count`` simulator renders and the photos
+    under ``photos`` (None: renders only), ``repeats`` calls each per set, then the balltrack
+    detector's stage split over ``passes`` passes; OpenCV on ``threads`` threads. The figures,
+    goals and tables of ``balltrack experiment detector_speed`` and of this module's main."""
     from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed
 
     clock = Stopwatch()
-    result = ExperimentResult(NAME, TITLE, mode="in-process", quick=options.quick)
+    result = ExperimentResult(NAME, TITLE, mode="in-process", quick=quick)
     record_machine_speed(result)
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
+    previous_threads = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
     try:
-        config = options.detector_config()
         detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
         compile_kernels()  # (as a service does before its first frame: no call waits for numba)
-        sets = {"renders": simulator_frames(options.budget(30, 60))}
-        photos = options.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
+        sets = {"renders": simulator_frames(render_count)}
         if photos is not None and (frames := photo_frames(photos)):
             sets["photos"] = frames
-        repeats = 60 if options.quick else 300
-        passes = 1 if options.quick else 3
         rows, breakdowns = [], {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats)
@@ -190,7 +188,7 @@ def run(options) -> "ExperimentResult":
         result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
                       "plain / balltrack"], rows,
                      f"Calls alternating on the same frames, {repeats} per detector and set, "
-                     "OpenCV on one thread:")
+                     f"OpenCV on {threads} thread{'s' if threads > 1 else ''}:")
         result.table(["stage", *(f"{name}: {group}" for name in breakdowns
                                  for group in ("all frames", "middle fifth"))], breakdown_rows(breakdowns),
                      f"Where the balltrack detector's time goes, ms per frame (the detector alone, {passes} pass{'es' if passes > 1 else ''} "
@@ -200,9 +198,18 @@ def run(options) -> "ExperimentResult":
         result.settings = {"photos": str(photos) if "photos" in sets else "none",
                            "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}
     finally:
-        cv2.setNumThreads(threads)
+        cv2.setNumThreads(previous_threads)
     result.seconds = clock.seconds
     return result
+
+
+def run(options) -> "ExperimentResult":
+    """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
+    photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
+    photos = options.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
+    return speed_result(options.detector_config(), options.budget(30, 60), photos,
+                        repeats=60 if options.quick else 300, passes=1 if options.quick else 3,
+                        quick=options.quick)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -220,41 +227,17 @@ def main(argv: list[str] | None = None) -> int:
         print("detector_speed: --repeats must be at least 10, --frames at least 3 and --threads "
               "at least 1", file=sys.stderr)
         return 2
-    cv2.setNumThreads(args.threads)
-    config = DetectorConfig()
-    detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
-    compile_kernels()
-    sets = {"simulator renders": simulator_frames(args.frames)}
     photos = None if args.no_photos else args.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
-    if photos is not None:
-        if not photos.is_dir():
-            print(f"detector_speed: {photos}: not a folder", file=sys.stderr)
-            return 2
-        frames = photo_frames(photos)
-        if frames:
-            sets["real photos (640x480)"] = frames
-        else:
-            print(f"detector_speed: no .jpg/.png photos under {photos}", file=sys.stderr)
-    speed = machine_speed()
-    print(f"OpenCV threads: {cv2.getNumThreads()}; machine: Python loop {speed['python_loop_ms']:.1f} ms, "
-          f"blur {speed['opencv_blur_ms']:.2f} ms (see experiments.base.machine_speed)")
-    breakdowns = {}
-    print(f"{'frames (640x480)':<22} {'detector':<10} {'wall p50':>9} {'wall p90':>9} "
-          f"{'cpu p50':>8} {'cpu p90':>8}  (ms)")
-    for name, frames in sets.items():
-        results = measure(detectors, frames, args.repeats)
-        for detector_name, result in results.items():
-            print(f"{name:<22} {detector_name:<10} {result['wall_p50_ms']:>9.2f} {result['wall_p90_ms']:>9.2f} "
-                  f"{result['cpu_p50_ms']:>8.2f} {result['cpu_p90_ms']:>8.2f}")
-        ratio = results["plain"]["wall_p50_ms"] / results["balltrack"]["wall_p50_ms"]
-        verdict = "PASS" if ratio >= GOAL_RATIO else "MISS"
-        print(f"{name:<22} ratio plain/balltrack (wall p50) {ratio:.2f}; goal {GOAL_RATIO:g}x faster "
-              f"than plain: {verdict}  ({len(frames)} frames)")
-        breakdowns[name] = stage_breakdown(detectors["balltrack"], frames)
-    print("balltrack detector, ms per frame by stage (all frames / the middle fifth, which the p50 reads):")
-    for row in breakdown_rows(breakdowns):
-        print(f"  {row[0]:<12} " + "   ".join(f"{name}: {row[1 + 2 * index]} / {row[2 + 2 * index]}"
-                                               for index, name in enumerate(breakdowns)))
+    if photos is not None and not photos.is_dir():
+        print(f"detector_speed: {photos}: not a folder", file=sys.stderr)
+        return 2
+    if photos is not None and not any(path for pattern in ("*.jpg", "*.png") for path in photos.rglob(pattern)):
+        print(f"detector_speed: no .jpg/.png photos under {photos}", file=sys.stderr)
+        photos = None
+    result = speed_result(DetectorConfig(), args.frames, photos, args.repeats, passes=3, threads=args.threads)
+    print("\n\n".join([*result.notes, *result.tables]))
+    for goal in result.goals:
+        print(f"goal {goal.name}: {goal.achieved} (target {goal.target}): {goal.status}")
     return 0
 
 
