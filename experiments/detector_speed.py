@@ -76,9 +76,13 @@ def simulator_frames(count: int) -> list[np.ndarray]:
     return frames
 
 
+def photo_paths(folder: Path) -> list[Path]:
+    """The .jpg and .png files under ``folder``, searched recursively, sorted."""
+    return sorted(path for pattern in ("*.jpg", "*.png") for path in folder.rglob(pattern))
+
+
 def photo_frames(folder: Path) -> list[np.ndarray]:
-    paths = sorted(path for pattern in ("*.jpg", "*.png") for path in folder.rglob(pattern))
-    images = [cv2.imread(str(path)) for path in paths]
+    images = [cv2.imread(str(path)) for path in photo_paths(folder)]
     return [cv2.resize(image, (640, 480), interpolation=cv2.INTER_AREA)
             for image in images if image is not None]
 
@@ -231,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     if photos is not None and not photos.is_dir():
         print(f"detector_speed: {photos}: not a folder", file=sys.stderr)
         return 2
-    if photos is not None and not any(path for pattern in ("*.jpg", "*.png") for path in photos.rglob(pattern)):
+    if photos is not None and not photo_paths(photos):
         print(f"detector_speed: no .jpg/.png photos under {photos}", file=sys.stderr)
         photos = None
     result = speed_result(DetectorConfig(), args.frames, photos, args.repeats, passes=3, threads=args.threads)

@@ -157,13 +157,14 @@ def outline_edges(profiles, peak, colour, half, quantum, dark):
     first = np.zeros(rays, np.int64)
     found = np.zeros(rays, np.bool_)
     outermost = np.full(rays, count - 1, np.int64)
+    quantum, dark = np.float32(quantum), np.float32(dark)
     for ray in range(rays):
         last = -1
         for sample in range(count):
             if peak[ray, sample]:
                 last = sample
                 if not found[ray] and not is_shading(profiles, ray, sample, colour, colour_norm, half,
-                                                     np.float32(quantum), np.float32(dark)):
+                                                     quantum, dark):
                     first[ray], found[ray] = sample, True
         if last >= 0:
             outermost[ray] = last

@@ -97,14 +97,6 @@ def geometric_steps(px, py, keep, x, y, radius, iterations):
     return x, y, radius
 
 
-def geometric_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
-                     iterations: int = 3) -> tuple[float, float, float]:
-    """Gauss-Newton refinement of a circle on the geometric distances of points to it."""
-    px, py = np.asarray(px, np.float64), np.asarray(py, np.float64)
-    return geometric_steps(px, py, np.ones(px.size, np.bool_), float(x), float(y), float(radius),
-                           iterations)
-
-
 @compiled
 def robust_rounds(px, py, x, y, radius, rounds, geometric):
     """robust_circle's rounds (``rounds``: rows of tolerance over radius, floor in px):
@@ -137,9 +129,6 @@ def robust_rounds(px, py, x, y, radius, rounds, geometric):
     return True, x, y, radius, on_circle
 
 
-_ROUND_ARRAYS: dict[tuple, np.ndarray] = {}
-
-
 def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: float,
                   rounds: tuple, geometric: bool) -> tuple[float, float, float, np.ndarray] | None:
     """Circle through the points near (x, y, radius), in rounds of ever tighter tolerance
@@ -148,12 +137,9 @@ def robust_circle(px: np.ndarray, py: np.ndarray, x: float, y: float, radius: fl
     ``rounds``: (tolerance over radius, tolerance floor in pixels) per round. None when fewer
     than 8 points are within a round's tolerance or a fit is degenerate.
     """
-    table = _ROUND_ARRAYS.get(rounds)
-    if table is None:  # (the few round tables are constants: made into arrays once)
-        table = _ROUND_ARRAYS[rounds] = np.array(rounds, np.float64).reshape(-1, 2)
     ok, x, y, radius, on_circle = robust_rounds(
         np.asarray(px, np.float64), np.asarray(py, np.float64), float(x), float(y), float(radius),
-        table, bool(geometric))
+        np.array(rounds, np.float64).reshape(-1, 2), bool(geometric))
     return (x, y, radius, on_circle) if ok else None
 
 
@@ -205,9 +191,9 @@ def refine_on_boundary(proposal: Candidate, boundary_x: np.ndarray,
     near_columns = (xs > x - reach) & (xs < x + reach)
     if np.count_nonzero(near_columns) < 6:
         return None
-    ok, centre_x, centre_y, radius = refine_rounds(
-        (xs[near_columns] - x).astype(np.float64), (ys[near_columns] - y).astype(np.float64),
-        float(radius), _REFINE_TABLE)
+    # (relative to the proposal's centre; the boundary's float64 stays float64)
+    ok, centre_x, centre_y, radius = refine_rounds(xs[near_columns] - x, ys[near_columns] - y,
+                                                   float(radius), _REFINE_TABLE)
     if not ok:
         return None
     # Boundary pixels are the mask's outermost pixels, half a pixel inside its true edge.

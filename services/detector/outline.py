@@ -160,7 +160,8 @@ def outline_round(profiles, radii, directions, x, y, radius, start, stop, step, 
         hypotheses = 2 if differing >= 0.15 * samples else 1
         rounds = WIDE_FIT_TABLE
     else:  # each ray's edge nearest the circle
-        first, found, outermost = np.zeros(samples, np.int64), has_edge, has_edge.astype(np.int64)
+        # (one hypothesis: ``outermost`` only gives the variables the wide round's types)
+        first, found, outermost = np.zeros(samples, np.int64), has_edge, np.zeros(samples, np.int64)
         target = np.float32(radius)
         for ray in range(samples):
             nearest = np.inf

@@ -77,7 +77,7 @@ def compiled_signatures() -> dict[str, set[str]]:
 def test_compile_kernels_compiles_what_frames_need():
     # A service calls compile_kernels before its first frame so that no frame waits for the
     # compiler: frames of every kind must then need no new compilation.
-    assert compile_kernels() > 0
+    compile_kernels()
     compiled = compiled_signatures()
     detector = BallDetector(DetectorConfig())
     frames = [scene([(330.0, 260.0, 30.0), (100.0, 100.0, 12.0)]),

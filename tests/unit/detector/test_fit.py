@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from balltrack.services.detector.fit import (fit_circle, geometric_circle, kasa, refine_on_boundary,
+from balltrack.services.detector.fit import (fit_circle, geometric_steps, kasa, refine_on_boundary,
                                              robust_circle)
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.proposals import boundary_points
@@ -63,9 +63,9 @@ def test_a_kasa_circle_is_the_same_from_any_origin(seed, origin_x, origin_y):
         assert moved[2] == pytest.approx(direct[2], abs=tolerance)
 
 
-def test_geometric_circle_converges_from_a_rough_start():
+def test_geometric_steps_converge_from_a_rough_start():
     px, py = circle_points(10.0, 20.0, 15.0, count=90)
-    x, y, radius = geometric_circle(px, py, 11.0, 19.0, 13.5, iterations=10)
+    x, y, radius = geometric_steps(px, py, np.ones(px.size, bool), 11.0, 19.0, 13.5, 10)
     assert (x, y, radius) == pytest.approx((10.0, 20.0, 15.0), abs=1e-4)
 
 
