@@ -128,18 +128,21 @@ class BallDetector:
         image = check_image(image_bgr)
         height, width = image.shape[:2]
         config = self.config
-        scale = 1.0
+        scale = scale_y = 1.0
         work = image
         if config.work_width and width > config.work_width:
             scale = config.work_width / width
             work_size = (config.work_width, max(8, round(height * scale)))
             work = cv2.resize(image, work_size, interpolation=cv2.INTER_AREA)
+            scale_y = work_size[1] / height  # (the work height is rounded)
 
         planes = self._masker.planes(work)
         self._lap("colour mask", started)
         candidates = self._find_candidates(planes, scale)
-        detections = [Detection(u=c.x / scale, v=c.y / scale, radius_px=c.radius / scale,
-                                score=round(c.score, 4)) for c in candidates]
+        # (whole coordinates are pixel centres, and a shrunk pixel's centre is the centre of the
+        # input pixels it averages: half a shrunk pixel in, less half an input pixel)
+        detections = [Detection(u=(c.x + 0.5) / scale - 0.5, v=(c.y + 0.5) / scale_y - 0.5,
+                                radius_px=c.radius / scale, score=round(c.score, 4)) for c in candidates]
         mask = planes.mask
         if scale != 1.0:
             mask = cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)

@@ -414,6 +414,19 @@ def test_any_frame_size(detector, width, height):
     assert_found(result.detections, u, v, radius, centre_tolerance=0.5 * max(1.0, scale))
 
 
+@pytest.mark.parametrize("width, height", [(1280, 960), (1920, 1080), (1000, 563)])
+def test_frames_wider_than_work_width_keep_their_centres(detector, width, height):
+    # Such frames are shrunk to work_width; a shrunk pixel's centre is not its index over the
+    # scale. Before that was taken into account centres came out 0.5 px (1280) to 1 px (1920)
+    # up and left of the ball's.
+    shrink = width / 640
+    for index, (across, down, size) in enumerate([(0.47, 0.42, 0.063), (0.78, 0.69, 0.086)]):
+        u, v, radius = across * width + 0.3, down * height + 0.7, size * width
+        result = detector.detect(scene([(u, v, radius)], width=width, height=height, seed=index))
+        assert len(result.detections) == 1, result.detections
+        assert_found(result.detections, u, v, radius, centre_tolerance=0.1 * shrink)
+
+
 def test_mono_frames_give_no_ball_and_grey_arrays_are_accepted(detector):
     grey = cv2.cvtColor(scene([(320.0, 240.0, 30.0)]), cv2.COLOR_BGR2GRAY)
     assert detector.detect(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)).detections == []
