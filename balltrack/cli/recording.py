@@ -18,6 +18,7 @@ from datetime import datetime, timezone
 
 from balltrack.cli.output import Output, silence_closed_stdout
 from balltrack.cli.session import networked, open_or_report
+from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics, wait_routed
@@ -61,6 +62,7 @@ def command_record(args) -> int:
         return _fail(args, "--nice: must be 0 to 19", 2)
     if args.nice:
         os.nice(args.nice)  # before the session: threads take the priority of their creator
+    keep_freed_memory()  # (frames come and go at 30 a second)
     stop = stop_on_signals()
     session = open_or_report(args)
     if session is None:

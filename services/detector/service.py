@@ -13,6 +13,7 @@ Example:
 
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
+from balltrack.common.memory import keep_freed_memory
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
@@ -32,6 +33,8 @@ def ball_fields(detection, width: int, height: int) -> dict:
 def build(service: ServiceContext):
     # Before the first frame (and before the service counts as alive): no frame waits for numba.
     service.log.info("detector kernels ready in %.1f s", compile_kernels())
+    # A frame's megabytes are not faulted in again for the next one (see common/memory.py).
+    keep_freed_memory()
     largest = service.publisher(keys.DETECTED_BALL, "Ball2D")
     every = service.publisher(keys.DETECTED_BALLS, "Ball2DArray")
     annotated = service.publisher(keys.IMAGE_OUT, "Image")
