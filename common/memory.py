@@ -6,8 +6,9 @@ megabytes are free at the top of its heap, and serves large blocks from mappings
 that it unmaps when they are freed; the next frame then takes a page fault for every 4 KB it
 touches again: the detector took 6,000-16,000 a second while the demo's ball was large, and
 the demo's recorder about 10,000 a second all along, up to 5 us each on this project's
-virtual machines. Keeping freed memory, as real-time guidelines advise (ROS 2's among them),
-makes a frame's memory cost what the last one's did.
+virtual machines. Keeping freed memory makes a frame's memory cost what the last one's did.
+Real-time programs do this (ros-realtime's ``minimal_memory_lock`` example turns trimming and
+mmap off altogether); here both stay bounded, so a huge frame's memory still goes back.
 
 The processes that take every camera frame call it: the detector service and ``balltrack
 record``. Services of small messages do not need it (a few dozen faults a second), and keep
