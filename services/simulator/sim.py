@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 
 from balltrack.common.config import ConfigError  # noqa: E402
 from balltrack.common.geometry import wrap_angle  # noqa: E402
+from balltrack.common.memory import release_freed_memory  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
 from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
 from balltrack.services.simulator.world import (  # noqa: E402
@@ -452,6 +453,8 @@ class Simulation:
                 raise ValueError(f"scenario: expected a scenario name, got {scenario!r}")
             loaded = load_scenario(scenario)  # ConfigError (a ValueError) if bad: nothing changed
             self._load(loaded, self._data.time)
+            # (the old world's model, data and renderer, freed amid the heap, would stay resident)
+            release_freed_memory()
         self._restart()
 
     @_locked

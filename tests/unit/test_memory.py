@@ -1,4 +1,5 @@
-"""common/memory.py: freed memory stays in the process for the next frame."""
+"""common/memory.py: freed memory stays in the process for the next frame, or goes back to
+the system when released."""
 
 import subprocess
 import sys
@@ -39,3 +40,28 @@ def test_a_frames_memory_is_not_faulted_in_again():
     # 12 MB a frame is 3,072 pages: by default all of them are faulted in again every frame
     assert faults_per_frame("default") > 1000
     assert faults_per_frame("keep") < 50
+
+
+# Blocks freed in the middle of the heap (one kept after them): glibc keeps them resident
+# until told otherwise.
+RELEASE = """
+import sys
+import numpy as np
+from balltrack.common.memory import release_freed_memory
+def resident_mb():
+    return int(open("/proc/self/statm").read().split()[1]) * 4096 / 1e6
+blocks = [np.ones(100_000, np.uint8) for _ in range(300)]
+kept = np.ones(100_000, np.uint8)
+del blocks
+before = resident_mb()
+assert release_freed_memory()
+print(before - resident_mb())
+"""
+
+
+def test_freed_memory_amid_the_heap_goes_back_when_released():
+    if not keep_freed_memory():
+        pytest.skip("the C library is not glibc: nothing to release")
+    result = subprocess.run([sys.executable, "-c", RELEASE], capture_output=True, text=True,
+                            timeout=60, check=True)
+    assert float(result.stdout) > 20  # of the 30 MB freed
