@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from balltrack.common.memory import keep_freed_memory
+from balltrack.common.memory import glibc_function
 
 # A frame's worth of churn: blocks allocated, touched and freed together, more in all than
 # glibc's default trim threshold (twice the largest block freed so far) keeps.
@@ -35,7 +35,7 @@ def faults_per_frame(mode: str) -> float:
 
 
 def test_a_frames_memory_is_not_faulted_in_again():
-    if not keep_freed_memory():
+    if glibc_function("mallopt") is None:
         pytest.skip("the C library is not glibc: nothing to set")
     # 12 MB a frame is 3,072 pages: by default all of them are faulted in again every frame
     assert faults_per_frame("default") > 1000
@@ -60,7 +60,7 @@ print(before - resident_mb())
 
 
 def test_freed_memory_amid_the_heap_goes_back_when_released():
-    if not keep_freed_memory():
+    if glibc_function("malloc_trim") is None:
         pytest.skip("the C library is not glibc: nothing to release")
     result = subprocess.run([sys.executable, "-c", RELEASE], capture_output=True, text=True,
                             timeout=60, check=True)
