@@ -35,7 +35,8 @@ from balltrack.common.config import (ConfigError, config_to_dict, describe_confi
                                      replace_config)
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
-from balltrack.common.session import ArgumentParser, SessionOpenError, add_session_arguments, open_from_args
+from balltrack.common.session import (ArgumentParser, SessionOpenError, add_session_arguments, close_session,
+                                      open_from_args)
 from balltrack.common.shutdown import stop_on_signals
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
@@ -381,6 +382,8 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
                 entity.undeclare()
             except Exception:
                 pass
-        session.close()
+        reason = close_session(session)
+        if reason:
+            context.log.warning("%s", reason)
     context.log.info("stopped")
     return status

@@ -26,8 +26,9 @@ import time
 from pathlib import Path
 
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys
-from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, default_endpoints,
-                                      load_config_file, secure_client_path, secure_router_path)
+from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, close_session,
+                                      default_endpoints, load_config_file, secure_client_path,
+                                      secure_router_path)
 from balltrack.common.status import service_status
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
                                          die_with_parent, open_for, pid_alive, save_launch, supervise,
@@ -184,8 +185,7 @@ def network_status(info: dict, timeout: float) -> tuple[set[str] | None, dict[st
     except SessionOpenError as error:
         return None, {}, str(error)
     alive, stats = service_status(session, info.get("namespace", ""), timeout)
-    session.close()
-    return alive, stats, None
+    return alive, stats, close_session(session)
 
 
 # -- run folders -----------------------------------------------------------------------------

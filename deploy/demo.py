@@ -43,7 +43,7 @@ from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
-from balltrack.common.session import ArgumentParser, open_session, secure_client_path
+from balltrack.common.session import ArgumentParser, close_session, open_session, secure_client_path
 from balltrack.common.shutdown import set_from_signal
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.command import Command
@@ -405,8 +405,8 @@ def run(args) -> int:
             observer.close()
         if recording is not None:
             stop_recording(recording, run_dir)
-        if session is not None:
-            session.close()
+        if session is not None and (reason := close_session(session)):
+            print(f"demo: {reason}", file=sys.stderr)
         if system is not None:
             code = system.stop()
             if code != 0:

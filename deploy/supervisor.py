@@ -132,7 +132,7 @@ def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.
     import zenoh
 
     from balltrack.common.keys import Keys
-    from balltrack.common.session import SessionOpenError
+    from balltrack.common.session import SessionOpenError, close_session
 
     deadline = time.monotonic() + timeout
     keys = Keys(info.get("namespace", ""))
@@ -159,7 +159,7 @@ def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.
             missing = set(services) - alive
     finally:
         subscriber.undeclare()
-        session.close()
+        close_session(session)  # (a router out of reach already shows as services missing)
     return missing
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.keys import Keys
@@ -31,7 +31,7 @@ def ask(args, service: str, request: dict, field: str = "config") -> tuple[int, 
     try:
         replies = list(session.get(key, payload=encode("ConfigRequest", request), timeout=args.timeout))
     finally:
-        session.close()
+        close_or_report(args, session)
     for reply in replies:
         if reply.ok is None:
             continue

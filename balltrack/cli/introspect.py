@@ -12,7 +12,7 @@ import time
 from collections import defaultdict
 
 from balltrack.cli.output import Output, silence_closed_stdout
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.shutdown import stop_on_signals
@@ -98,7 +98,7 @@ def _snapshot(args):
         graph = Graph.query(session, args.timeout)
         traffic = _listen(session, keys("**"), args.window, stop)
     finally:
-        session.close()
+        close_or_report(args, session)
     return keys, graph, traffic
 
 

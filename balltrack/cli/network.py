@@ -4,11 +4,10 @@ import json
 import sys
 from pathlib import Path
 
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
-from balltrack.common.keys import Keys
-from balltrack.common.messages import SIM_OPS, decode, encode
+from balltrack.common.messages import SIM_OPS
 from balltrack.common.session import DEFAULT_PORT, first_error_line, router_config, secure_router_path
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.common.status import service_status
@@ -44,7 +43,7 @@ def command_router(args) -> int:
     stop = stop_on_signals()
     while not stop.wait(0.5):
         pass
-    session.close()
+    close_or_report(args, session)
     return 0
 
 
@@ -101,7 +100,7 @@ def command_status(args) -> int:
     if session is None:
         return 1
     alive, stats = service_status(session, args.namespace, args.timeout)
-    session.close()
+    close_or_report(args, session)
     print(f"{'service':<12} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
           f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7}")
     for service in key_table.SERVICES:
@@ -139,7 +138,7 @@ def command_sim(args) -> int:
     if session is None:
         return 1
     reply = send_command(session, request, args.namespace, args.timeout)
-    session.close()
+    close_or_report(args, session)
     if not reply["ok"]:
         print(f"balltrack sim: {reply.get('error')}", file=sys.stderr)
         return 1

@@ -12,7 +12,7 @@ import time
 
 import yaml
 
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, encode, header, shorten
 from balltrack.common.shutdown import stop_on_signals
@@ -76,7 +76,7 @@ def command_pub(args) -> int:
             stop.wait(max(0.0, next_send - time.monotonic()))
         publisher.undeclare()
     finally:
-        session.close()
+        close_or_report(args, session)
     print(f"published {sent} {message_name} on {keys(args.key)}", file=sys.stderr)
     return 0
 

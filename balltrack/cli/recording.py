@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 
 from balltrack.cli.output import Output, silence_closed_stdout
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.shutdown import stop_on_signals
@@ -98,7 +98,7 @@ def command_record(args) -> int:
         counts = recording.close()
         elapsed = time.monotonic() - started
     finally:
-        session.close()
+        close_or_report(args, session)
     out.line(f"recorded {counts.written} messages in {elapsed:.1f} s into {args.output}"
              + (f" ({counts.dropped} dropped: the disk was too slow)" if counts.dropped else ""))
     for topic, count in sorted(counts.per_topic.items()):
@@ -137,7 +137,7 @@ def command_play(args) -> int:
         finally:
             if not stop.is_set():  # the end of the file: let the router take what is queued
                 _wait_routed(args, session)
-            session.close()
+            close_or_report(args, session)
     elapsed = time.monotonic() - started
     out.line(f"published {counts.published} messages in {elapsed:.1f} s "
              f"({counts.passes} complete pass{'es' if counts.passes != 1 else ''})")

@@ -2,7 +2,7 @@
 
 import sys
 
-from balltrack.common.session import SessionOpenError, add_session_arguments, open_from_args
+from balltrack.common.session import SessionOpenError, add_session_arguments, close_session, open_from_args
 
 
 def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0):
@@ -22,3 +22,11 @@ def open_or_report(args):
     except SessionOpenError as error:
         print(f"balltrack {args.command}: {error}", file=sys.stderr)
         return None
+
+
+def close_or_report(args, session) -> None:
+    """Close the session; when the router cannot be told (the network is gone), one line on
+    stderr instead of Zenoh's traceback, and the command's exit status stays its own."""
+    reason = close_session(session)
+    if reason:
+        print(f"balltrack {args.command}: {reason}", file=sys.stderr)

@@ -12,7 +12,7 @@ import time
 import msgpack
 
 from balltrack.cli.output import Output, silence_closed_stdout
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, decode
@@ -49,7 +49,7 @@ def _watch(args, on_sample, report=None, period: float = POLL_SECONDS, on_open=N
                 report(out)
         subscriber.undeclare()
     finally:
-        session.close()
+        close_or_report(args, session)
     if out.closed:
         silence_closed_stdout()
     return 0

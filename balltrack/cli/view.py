@@ -12,7 +12,7 @@ detector's annotated frame), /scene (located and true balls), /tf (world -> base
 
 import sys
 
-from balltrack.cli.session import networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.shutdown import stop_on_signals
 
 
@@ -90,7 +90,7 @@ def command_view(args) -> int:
     try:
         return (_serve_foxglove if args.foxglove else _serve_rerun)(args, session, stop)
     finally:
-        session.close()
+        close_or_report(args, session)
 
 
 def register(commands) -> None:
