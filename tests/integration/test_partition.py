@@ -52,28 +52,32 @@ LOCATOR_LEASE_MS = 500
 SIMULATOR = ["--set", "scenario=chase", "--set", "pacing=realtime", "--set", "rate_hz=20",
              "--set", "max_linear_accel=10", "--set", "max_angular_accel=40"]
 
+# The two callbacks run on different Zenoh threads: their lines go through one locked writer
+# (balltrack's Output), or two lines can interleave into one that is not JSON and is lost.
 WATCHER = r"""
 import json, signal, sys, threading, time
+from balltrack.cli.output import Output
 from balltrack.common.messages import decode
 from balltrack.common.session import open_session
 
+stop = threading.Event()
+signal.signal(signal.SIGTERM, lambda *_: stop.set())
+out = Output(stop)
 session = open_session([sys.argv[1]], open_timeout=60)
 
 def on_truth(sample):
     truth = decode("GroundTruth", sample.payload.to_bytes())
     ball = truth["balls"][0]["position"] if truth["balls"] else None
-    print(json.dumps({"time": time.time(), "stamp": truth["header"]["stamp"],
-                      "robot": truth["robot"], "ball": ball}), flush=True)
+    out.line(json.dumps({"time": time.time(), "stamp": truth["header"]["stamp"],
+                         "robot": truth["robot"], "ball": ball}))
 
 def on_token(sample):
-    print(json.dumps({"time": time.time(), "token": str(sample.key_expr).split("/", 1)[1],
-                      "kind": str(sample.kind)}), flush=True)
+    out.line(json.dumps({"time": time.time(), "token": str(sample.key_expr).split("/", 1)[1],
+                         "kind": str(sample.kind)}))
 
 session.declare_subscriber("sim/ground_truth", on_truth)
 session.liveliness().declare_subscriber("alive/*", on_token, history=True)
-stop = threading.Event()
-signal.signal(signal.SIGTERM, lambda *_: stop.set())
-print("watching", flush=True)
+out.line("watching")
 while not stop.wait(1.0):  # the callbacks do the work; SIGTERM ends it
     pass
 session.close()
