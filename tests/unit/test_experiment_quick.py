@@ -92,6 +92,11 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
         ours = figures[f"detector_speed/{name}/balltrack/wall_p50_ms"]
         assert plain > 0 and ours > 0
         assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(plain / ours, rel=1e-5)
+    # The renders once more, paced as a camera's frames arrive: figures only, no goal.
+    paced_plain = figures["detector_speed/renders_paced/plain/wall_p50_ms"]
+    paced_ours = figures["detector_speed/renders_paced/balltrack/wall_p50_ms"]
+    assert paced_plain > 0 and paced_ours > 0
+    assert figures["detector_speed/renders_paced/ratio"] == pytest.approx(paced_plain / paced_ours, rel=1e-5)
     # (the machine's own speed in the same run: a ratio moves with it)
     assert figures["detector_speed/machine/python_loop_ms"] > 0
     assert figures["detector_speed/machine/opencv_blur_ms"] > 0
