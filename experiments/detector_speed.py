@@ -165,6 +165,19 @@ def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]]) -> list[l
     return rows
 
 
+def recorded(result: "ExperimentResult", name: str, count: int, measured: dict[str, dict[str, float]],
+             label: str | None = None) -> tuple[list, float]:
+    """Record ``measured``'s figures under ``name`` (each detector's, and the ratio plain /
+    balltrack of their wall p50s); returns its row of the report's table, and the ratio."""
+    for detector_name, figures_of in measured.items():
+        for metric, value in figures_of.items():
+            result.figure(f"{name}/{detector_name}/{metric}", value)
+    plain, ours = measured["plain"], measured["balltrack"]
+    ratio = result.figure(f"{name}/ratio", plain["wall_p50_ms"] / ours["wall_p50_ms"])
+    return [label or name, count, f"{plain['wall_p50_ms']:.2f} / {plain['wall_p90_ms']:.2f}",
+            f"{ours['wall_p50_ms']:.2f} / {ours['wall_p90_ms']:.2f}", f"{ratio:.2f}"], ratio
+
+
 def speed_result(config: DetectorConfig, render_count: int, photos: Path | None, repeats: int,
                  passes: int, threads: int = 1, quick: bool = False) -> "ExperimentResult":
     """Both detectors timed side by side on ``render_count`` simulator renders and the photos
@@ -187,29 +200,17 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
         rows, paced_rows, breakdowns = [], [], {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats)
-            for detector_name, figures_of in measured.items():
-                for metric, value in figures_of.items():
-                    result.figure(f"{name}/{detector_name}/{metric}", value)
+            row, speedup = recorded(result, name, len(frames), measured)
+            rows.append(row)
             plain, ours = measured["plain"]["wall_p50_ms"], measured["balltrack"]["wall_p50_ms"]
-            speedup = result.figure(f"{name}/ratio", plain / ours)
             result.goal(name, f"{name} (640x480, one thread): the balltrack detector at least "
                               f"{GOAL_RATIO:g}x as fast as the plain pipeline (wall p50)",
                         f">= {GOAL_RATIO:g}x", f"{speedup:.2f}x ({plain:.2f} vs {ours:.2f} ms)",
                         speedup >= GOAL_RATIO)
-            rows.append([name, len(frames),
-                         f"{plain:.2f} / {measured['plain']['wall_p90_ms']:.2f}",
-                         f"{ours:.2f} / {measured['balltrack']['wall_p90_ms']:.2f}", f"{speedup:.2f}"])
             if name == "renders":
                 paced = measure(detectors, frames, repeats, pause=PACED_PAUSE)
-                for detector_name, figures_of in paced.items():
-                    for metric, value in figures_of.items():
-                        result.figure(f"renders_paced/{detector_name}/{metric}", value)
-                paced_plain, paced_ours = paced["plain"]["wall_p50_ms"], paced["balltrack"]["wall_p50_ms"]
-                result.figure("renders_paced/ratio", paced_plain / paced_ours)
-                paced_rows.append([f"renders, one call per {1000 * PACED_PAUSE:.0f} ms", len(frames),
-                             f"{paced_plain:.2f} / {paced['plain']['wall_p90_ms']:.2f}",
-                             f"{paced_ours:.2f} / {paced['balltrack']['wall_p90_ms']:.2f}",
-                             f"{paced_plain / paced_ours:.2f}"])
+                paced_rows.append(recorded(result, "renders_paced", len(frames), paced,
+                                           f"renders, one call per {1000 * PACED_PAUSE:.0f} ms")[0])
             breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
             for stage, times in breakdowns[name].items():
                 result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
