@@ -62,7 +62,8 @@ Check = Callable[[Any, str], Any]
 
 
 def _fail(path: str, reason: str):
-    raise MessageError(f"{path}: {reason}")
+    # (a path may hold a peer's map key: ConfigReply's parameter names, any string at all)
+    raise MessageError(f"{shorten(path, 200)}: {reason}")
 
 
 def integer(minimum: int | None = None, maximum: int | None = None) -> Check:

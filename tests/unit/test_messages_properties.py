@@ -242,3 +242,12 @@ def test_lying_jpeg_is_refused_before_decoding():
     with pytest.raises(MessageError, match="cannot hold"):
         image_to_bgr(message)
     assert image_to_bgr(_image("jpeg")).shape == (6, 8, 3)  # a real small JPEG still decodes
+
+
+def test_a_peers_map_key_in_an_error_stays_on_one_line():
+    # (found by test_field_mutations_of_a_valid_message: a parameter named "\n", declared as None)
+    payload = pack({**VALID["ConfigReply"], "parameters": {"\n" + "x" * 5000: None}})
+    with pytest.raises(MessageError) as raised:
+        decode("ConfigReply", payload)
+    assert "\n" not in str(raised.value) and len(str(raised.value)) < 1000
+    assert str(raised.value).startswith("parameters.\\nxxx")
