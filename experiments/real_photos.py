@@ -21,6 +21,7 @@ Example::
 
     python -m balltrack.experiments.real_photos /work/shared/data
     python -m balltrack.experiments.real_photos /work/shared/data/real_tennis_dev --set param2=18
+    python -m balltrack.experiments.real_photos /work/shared/data --summary --misses
     balltrack experiment real_photos --photos /work/shared/data --out runs/photos
 
 The photos are only read: nothing of them is copied into the output folder but file names and
@@ -43,6 +44,7 @@ from balltrack.experiments.detector_speed import PlainDetector
 from balltrack.experiments.photo_variants import VARIANTS, Variant
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
+from balltrack.services.detector.explain import explain_place, summary
 
 MIN_BALL_PX = 20
 GOAL_RECALL = 0.90
@@ -241,6 +243,41 @@ def print_images(name: str, scored: dict) -> None:
           f"({scored['false_positives']}/{scored['images']}), median {scored['median_ms']:.1f} ms/image")
 
 
+def missed_balls(folder, config: DetectorConfig) -> list[dict]:
+    """Every counted ball of a labelled set that the balltrack detector does not find, with why
+    (``services/detector/explain.py``): ``{file, u, v, radius_px, summary, explanation}``, in
+    file order."""
+    folder = Path(folder)
+    labels = json.loads((folder / "labels.json").read_text())
+    detector = BallDetector(config)
+    missed = []
+    for name in sorted(labels):
+        image = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
+        if image is None:
+            raise FileNotFoundError(f"{folder / name}: missing or not an image")
+        result, judged = detector.detect_judged(image)
+        for box in labels[name]:
+            radius = max(box["w"], box["h"]) / 2.0
+            if 2.0 * radius < MIN_BALL_PX:
+                continue
+            explanation = explain_place(image, result, judged, config, box["x"] + box["w"] / 2.0,
+                                        box["y"] + box["h"] / 2.0, radius)
+            if explanation["found"] is None:
+                missed.append({"file": name, "u": explanation["u"], "v": explanation["v"],
+                               "radius_px": radius, "summary": summary(explanation),
+                               "explanation": explanation})
+    return missed
+
+
+def print_misses(folders: list[Path], config: DetectorConfig) -> None:
+    for folder in folders:
+        missed = missed_balls(folder, config)
+        print(f"== {folder.name}: {len(missed)} balls of at least {MIN_BALL_PX} px not found")
+        for ball in missed:
+            print(f"{ball['file']} ball at ({ball['u']:.0f}, {ball['v']:.0f}), radius {ball['radius_px']:.0f} px: "
+                  f"{ball['summary']}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.real_photos",
                                      description="Score the ball detector on labelled photo sets.")
@@ -255,6 +292,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", action="store_true",
                         help="also score altered copies of the photos (mirrored, smaller, exposure, "
                              "white balance, JPEG, noise: see photo_variants.py), balltrack only")
+    parser.add_argument("--misses", action="store_true",
+                        help="also list each counted ball the balltrack detector misses, with why "
+                             "(the colour there, or the checks its candidate failed)")
     args = parser.parse_args(argv)
     try:
         config = load_config(DetectorConfig, args.config, args.set, section="detector")
@@ -282,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {goal}")
     if args.variants:
         print_variants(folders, config)
+    if args.misses:
+        print_misses(folders, config)
     return 0
 
 

@@ -304,14 +304,11 @@ def hue_in_range(hue: float, config: DetectorConfig, margin: float = -0.5) -> bo
     return hue >= low or hue <= high
 
 
-def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
-    """Score in [0, 1] of a measured circle, or None when a check fails.
-
-    The more mask lies around the circle (leak, outside), the more of its rim must be a
-    clean edge: a ball touching another keeps most of its rim, a round patch cut out of a
-    large yellow-green area (sunlit trees) does not.
-    """
-    on_mask, colour = metrics.mask, metrics.colour
+def _bounds(metrics: CandidateMetrics, config: DetectorConfig) -> tuple[float, float, float, bool, float]:
+    """What ``judge`` and ``failed_checks`` read: the clutter around the rim, the rim's edge
+    support, the mask outside it, whether the candidate is plainly a ball by shape, and its
+    colourfulness floor."""
+    on_mask = metrics.mask
     clutter = on_mask.leak + on_mask.outside
     support, outside = on_mask.support, on_mask.outside
     if metrics.front_edges:
@@ -321,6 +318,18 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     # (size before spread: the spread is measured only when read, see MaskMetrics)
     sure_by_shape = metrics.clean and metrics.size >= SURE_SIZE and on_mask.spread <= SURE_SPREAD
     colourfulness_floor = config.min_colourfulness * (SURE_COLOURFULNESS if sure_by_shape else 1.0)
+    return clutter, support, outside, sure_by_shape, colourfulness_floor
+
+
+def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
+    """Score in [0, 1] of a measured circle, or None when a check fails.
+
+    The more mask lies around the circle (leak, outside), the more of its rim must be a
+    clean edge: a ball touching another keeps most of its rim, a round patch cut out of a
+    large yellow-green area (sunlit trees) does not.
+    """
+    on_mask, colour = metrics.mask, metrics.colour
+    clutter, support, outside, sure_by_shape, colourfulness_floor = _bounds(metrics, config)
     vivid = (colour.colourfulness >= colourfulness_floor
              or (sure_by_shape and colour.lit_colourfulness >= config.min_colourfulness))
     # A circle cut by the frame edge must still show as much rim as a whole ball of
@@ -354,3 +363,43 @@ def judge(metrics: CandidateMetrics, config: DetectorConfig) -> float | None:
     if score < config.min_score:
         return None
     return score
+
+
+def failed_checks(metrics: CandidateMetrics, config: DetectorConfig) -> list[str]:
+    """Why ``judge`` rejects a measured circle: one phrase per check it fails, with the value
+    and the bound ([] when it passes). Every check is evaluated, not only the first that
+    fails, so that one look shows all a candidate lacks (``balltrack detect --explain``,
+    ``real_photos --misses``). Mirrors ``judge`` check for check (a property test holds them
+    together); judge stays the fast path."""
+    on_mask, colour = metrics.mask, metrics.colour
+    clutter, support, outside, sure_by_shape, colourfulness_floor = _bounds(metrics, config)
+    failed = []
+    visible_floor = max(config.min_visible_fraction, min(1.0, 1.0 / metrics.size))
+    if on_mask.visible < visible_floor:
+        failed.append(f"rim in view {on_mask.visible:.2f} < {visible_floor:.2f}")
+    if on_mask.fill < config.min_fill_ratio:
+        failed.append(f"fill {on_mask.fill:.2f} < min_fill_ratio {config.min_fill_ratio:.2f}")
+    if support < config.min_edge_support + clutter:
+        failed.append(f"edge support {support:.2f} < {config.min_edge_support + clutter:.2f} "
+                      f"(min_edge_support plus the mask around the rim, {clutter:.2f})")
+    if outside > config.max_outside_ratio:
+        failed.append(f"mask around it {outside:.2f} > max_outside_ratio {config.max_outside_ratio:.2f}")
+    if not (colour.colourfulness >= colourfulness_floor
+            or (sure_by_shape and colour.lit_colourfulness >= config.min_colourfulness)):
+        failed.append(f"colourfulness {colour.colourfulness:.2f} < {colourfulness_floor:.2f} "
+                      "(mean chroma over the frame's bright level)")
+    if colour.mean_chroma < LOW_CHROMA and not hue_in_range(colour.mean_hue, config):
+        failed.append(f"a dim disc (mean chroma {colour.mean_chroma:.1f} < {LOW_CHROMA:g}) whose mean "
+                      f"colour's hue {colour.mean_hue:.1f} is outside h_min-h_max")
+    if (config.hue_margin > 0 and not sure_by_shape
+            and not hue_in_range(colour.colour_hue, config, config.hue_margin - 0.5)):
+        failed.append(f"hue of its colour pixels' mean {colour.colour_hue:.1f} is not hue_margin "
+                      f"({config.hue_margin:g}) inside h_min-h_max ({config.h_min}-{config.h_max})")
+    if (not metrics.highlighted and not metrics.front_edges and on_mask.leak > CORNER_LEAK
+            and on_mask.leak_runs >= CORNER_RUNS and on_mask.spread > CORNER_SPREAD):
+        failed.append(f"corners: the mask goes on past its rim in {on_mask.leak_runs} places and its "
+                      f"edge is uneven (spread {on_mask.spread:.3f} > {CORNER_SPREAD:g})")
+    score = max(0.0, min(1.0, (on_mask.fill + support - clutter) / 2.0))
+    if score < config.min_score:
+        failed.append(f"score {score:.2f} < min_score {config.min_score:.2f}")
+    return failed

@@ -30,7 +30,8 @@ module of this package:
 9. ``dark.py``: a few rejected candidates with something dark around them get a second look
    for a ball whose unlit side is black.
 
-No zenoh here: arrays in, dataclasses out. ``annotate.py`` draws the detections.
+No zenoh here: arrays in, dataclasses out. ``annotate.py`` draws the detections;
+``explain.py`` says why a place of a frame holds no ball (``detect_judged``'s candidates).
 
 Example::
 
@@ -101,6 +102,18 @@ class DetectionResult:
     mask: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
 
 
+@dataclass(frozen=True)
+class JudgedCandidate:
+    """A circle the detector measured and judged, in pixels of the input frame; ``score`` is
+    None when it failed a check (``checks.failed_checks`` says which)."""
+
+    u: float
+    v: float
+    radius_px: float
+    score: float | None
+    metrics: CandidateMetrics
+
+
 class BallDetector:
     """Finds balls of the configured colour in BGR frames of any size.
 
@@ -127,26 +140,47 @@ class BallDetector:
         started = time.perf_counter()
         image = check_image(image_bgr)
         height, width = image.shape[:2]
-        config = self.config
+        work_size = self.work_size(width, height)
         scale = scale_y = 1.0
         work = image
-        if config.work_width and width > config.work_width:
-            scale = config.work_width / width
-            work_size = (config.work_width, max(8, round(height * scale)))
+        if work_size is not None:
+            scale, scale_y = work_size[0] / width, work_size[1] / height  # (the work height is rounded)
             work = cv2.resize(image, work_size, interpolation=cv2.INTER_AREA)
-            scale_y = work_size[1] / height  # (the work height is rounded)
 
         planes = self._masker.planes(work)
         self._lap("colour mask", started)
         candidates = self._find_candidates(planes, scale)
-        # (whole coordinates are pixel centres, and a shrunk pixel's centre is the centre of the
-        # input pixels it averages: half a shrunk pixel in, less half an input pixel)
-        detections = [Detection(u=(c.x + 0.5) / scale - 0.5, v=(c.y + 0.5) / scale_y - 0.5,
-                                radius_px=c.radius / scale, score=round(c.score, 4)) for c in candidates]
+        detections = [Detection(*in_input_frame(c, scale, scale_y), score=round(c.score, 4))
+                      for c in candidates]
         mask = planes.mask
         if scale != 1.0:
             mask = cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
         return DetectionResult(detections=detections, mask=mask)
+
+    def work_size(self, width: int, height: int) -> tuple[int, int] | None:
+        """The (width, height) a frame of this size is shrunk to before processing; None when
+        it is processed at its own size (see ``work_width``)."""
+        work_width = self.config.work_width
+        if not work_width or width <= work_width:
+            return None
+        return work_width, max(8, round(height * work_width / width))
+
+    def detect_judged(self, image_bgr: np.ndarray) -> tuple[DetectionResult, list["JudgedCandidate"]]:
+        """``detect``, and every candidate circle it judged on the way, once each (its last
+        judgement), in pixels of the input frame: what explains a ball that was not found
+        (see ``explain.py``)."""
+        self._debug = []
+        try:
+            result = self.detect(image_bgr)
+            judged = self._debug
+        finally:
+            self._debug = None
+        height, width = check_image(image_bgr).shape[:2]
+        work_size = self.work_size(width, height) or (width, height)
+        scale, scale_y = work_size[0] / width, work_size[1] / height
+        last = {id(candidate): (candidate, metrics, score) for candidate, metrics, score in judged}
+        return result, [JudgedCandidate(*in_input_frame(c, scale, scale_y), score=score, metrics=metrics)
+                        for c, metrics, score in last.values()]
 
     def colour_mask(self, image_bgr: np.ndarray) -> np.ndarray:
         """The cleaned uint8 (0/255) colour mask of a frame, at the frame's size."""
@@ -352,6 +386,14 @@ class BallDetector:
                 candidate.score = judge(metrics, self.config) or 0.0
             results.extend(found)
         return results
+
+
+def in_input_frame(candidate: Candidate, scale: float, scale_y: float) -> tuple[float, float, float]:
+    """A candidate's centre and radius in pixels of the input frame, from those of the frame
+    shrunk by ``scale`` (x and radius) and ``scale_y`` (y)."""
+    # (whole coordinates are pixel centres, and a shrunk pixel's centre is the centre of the
+    # input pixels it averages: half a shrunk pixel in, less half an input pixel)
+    return (candidate.x + 0.5) / scale - 0.5, (candidate.y + 0.5) / scale_y - 0.5, candidate.radius / scale
 
 
 def acceptance_order(item: Measured) -> tuple[bool, float]:

@@ -35,6 +35,22 @@ def test_detect_offline_prints_one_json_line_per_image(tmp_path):
     assert lines[1]["balls"] == []
 
 
+def test_detect_explains_a_found_ball_and_a_pale_one(tmp_path):
+    # A ball of felt colour, and one washed out to a saturation far below s_min (80).
+    image = draw_ball(draw_ball(floor_image(), 200.0, 300.0, 25.0), 450.0, 200.0, 25.0, colour=(170, 200, 195))
+    photo = tmp_path / "two.png"
+    cv2.imwrite(str(photo), image)
+    result = balltrack("detect", str(photo), "--explain", "200,300", "--explain", "450.0,200")
+    assert result.returncode == 0, result.stderr
+    (line,) = [json.loads(text) for text in result.stdout.splitlines()]
+    found, pale = line["explain"]
+    assert (found["u"], found["v"]) == (200.0, 300.0) and found["found"] is not None
+    assert found["summary"].startswith("found at (200, 300)")
+    assert pale["found"] is None and pale["candidate"] is None
+    assert any(reason.startswith("saturation") for reason in pale["colour"]["failed"])
+    assert "saturation" in pale["summary"]
+
+
 def test_detect_on_real_photos_finds_balls():
     photo = SHARED / "data/real_tennis_dev/1747468182.jpg"
     if not photo.exists():
@@ -48,6 +64,8 @@ def test_detect_on_real_photos_finds_balls():
 @pytest.mark.parametrize("arguments, reason", [
     (["detect", "x.png", "--set", "min_radius=-1"], "min_radius"),
     (["detect", "x.png", "--set", "bogus=1"], "bogus: unknown parameter"),
+    (["detect", "x.png", "--explain", "412"], "expected U,V"),
+    (["detect", "x.png", "--explain", "inf,3"], "finite"),
     (["status", "--namespace", "a*b"], "namespace"),
     (["hz"], "required"),
     (["sim", "explode"], "invalid choice"),

@@ -8,7 +8,7 @@ import numpy as np
 
 from balltrack.experiments import photo_variants, real_photos
 from balltrack.services.detector.config import DetectorConfig
-from tests.unit.detector.drawing import scene
+from tests.unit.detector.drawing import draw_ball, scene
 
 
 def write_set(folder, balls_per_image):
@@ -89,3 +89,22 @@ def test_each_variant_is_scored_per_set(tmp_path):
     assert [row[0] for row in rows] == list(photo_variants.VARIANTS)
     mirrored = dict((row[0], row[1]) for row in rows)["mirrored"]
     assert mirrored.startswith("1.000 (2/2)") and mirrored.endswith("PASS")
+
+
+def test_misses_are_listed_with_why(tmp_path, capsys):
+    folder = tmp_path / "drawn"
+    write_set(folder, [[(200.0, 240.0, 25.0)]])
+    # a second ball in the labels, drawn washed out (its saturation far below s_min)
+    image = cv2.imread(str(folder / "0.png"))
+    pale = draw_ball(image.astype(np.float32), 420.0, 240.0, 25.0, colour=(170, 200, 195))
+    cv2.imwrite(str(folder / "0.png"), np.clip(np.rint(pale), 0, 255).astype(np.uint8))
+    labels = json.loads((folder / "labels.json").read_text())
+    labels["0.png"].append({"x": 395.0, "y": 215.0, "w": 50.0, "h": 50.0})
+    (folder / "labels.json").write_text(json.dumps(labels))
+    (missed,) = real_photos.missed_balls(folder, DetectorConfig())
+    assert (missed["file"], missed["u"], missed["v"], missed["radius_px"]) == ("0.png", 420.0, 240.0, 25.0)
+    assert "saturation" in missed["summary"] and missed["explanation"]["candidate"] is None
+    assert real_photos.main([str(tmp_path), "--summary", "--no-plain", "--misses"]) == 0
+    out = capsys.readouterr().out
+    assert "== drawn: 1 balls of at least 20 px not found" in out
+    assert "0.png ball at (420, 240), radius 25 px: no candidate" in out

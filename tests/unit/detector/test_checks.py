@@ -5,11 +5,14 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from balltrack.services.detector.checks import (CORNER_SPREAD, EDGE_STEPS, NO_COLOUR,
                                                 CandidateMetrics, ColourMetrics, MaskMetrics,
                                                 colour_stats, edge_spread, evenly_spaced,
-                                                hue_in_range, judge, mean_hue, measure_mask)
+                                                failed_checks, hue_in_range, judge, mean_hue,
+                                                measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
@@ -133,6 +136,47 @@ def test_judge_rejects(mask_changes, colour_changes, size):
     metrics = CandidateMetrics(dataclasses.replace(GOOD_MASK, **mask_changes),
                                dataclasses.replace(GOOD_COLOUR, **colour_changes), size=size)
     assert judge(metrics, DetectorConfig()) is None
+    assert failed_checks(metrics, DetectorConfig())
+
+
+def test_failed_checks_name_the_value_and_the_bound():
+    config = DetectorConfig()
+    assert failed_checks(CandidateMetrics(GOOD_MASK, GOOD_COLOUR, size=3.0), config) == []
+    ring = CandidateMetrics(dataclasses.replace(GOOD_MASK, fill=0.5), GOOD_COLOUR, size=3.0)
+    assert failed_checks(ring, config) == ["fill 0.50 < min_fill_ratio 0.55"]
+    # every failed check is listed, not only the first judge meets
+    green = dataclasses.replace(GOOD_COLOUR, colour_hue=48.5, colourfulness=0.1, lit_colourfulness=0.1)
+    cluttered = dataclasses.replace(GOOD_MASK, spread=0.06, fill=0.5, outside=0.6)
+    reasons = failed_checks(CandidateMetrics(cluttered, green, size=3.0), config)
+    assert [reason.split()[0] for reason in reasons] == ["fill", "edge", "mask", "colourfulness", "hue", "score"]
+    assert "48.5" in reasons[4] and "25-50" in reasons[4]
+
+
+def good_or(value, strategy):
+    """The good candidate's value, or any: most examples then fail one or two checks, and many
+    pass, so both sides of judge are exercised."""
+    return st.one_of(st.just(value), strategy)
+
+
+unit = st.floats(0.0, 1.0)
+
+
+@settings(max_examples=500, deadline=None)
+@given(mask=st.builds(MaskMetrics, visible=good_or(1.0, unit), support=good_or(0.95, unit),
+                      leak=good_or(0.02, unit), fill=good_or(0.97, unit), outside=good_or(0.01, unit),
+                      spread=good_or(0.02, st.floats(0.0, 0.2)), leak_runs=good_or(1, st.integers(0, 6))),
+       colour=st.builds(ColourMetrics, colourfulness=good_or(0.6, st.floats(0.0, 1.5)),
+                        mean_hue=good_or(36.0, st.floats(-1.0, 180.0)),
+                        mean_chroma=good_or(120.0, st.floats(0.0, 20.0)),
+                        colour_hue=good_or(36.0, st.floats(-1.0, 180.0)),
+                        lit_colourfulness=good_or(0.6, st.floats(0.0, 1.5))),
+       size=good_or(3.0, st.floats(0.3, 8.0)), highlighted=st.booleans(),
+       front_edges=st.sampled_from([0.0, 0.3, 0.9]), hue_margin=st.sampled_from([0.0, 3.0]),
+       wrapping=st.booleans())
+def test_failed_checks_agree_with_judge(mask, colour, size, highlighted, front_edges, hue_margin, wrapping):
+    config = DetectorConfig(hue_margin=hue_margin, **({"h_min": 20, "h_max": 10} if wrapping else {}))
+    metrics = CandidateMetrics(mask, colour, size=size, highlighted=highlighted, front_edges=front_edges)
+    assert (judge(metrics, config) is None) == bool(failed_checks(metrics, config))
 
 
 def test_judge_accepts_what_the_rejections_border_on():

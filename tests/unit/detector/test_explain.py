@@ -1,0 +1,53 @@
+"""Explaining a place of a frame (services/detector/explain.py), on drawn frames."""
+
+import numpy as np
+
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.detector import BallDetector
+from balltrack.services.detector.explain import explain_place, summary
+from tests.unit.detector.drawing import draw_ball, draw_box, floor, to_uint8
+
+PALE_BGR = (170, 200, 195)  # the felt's hue, washed out: saturation ~38, far below s_min 80
+
+
+def explained(image, places, config=None):
+    config = config or DetectorConfig()
+    result, judged = BallDetector(config).detect_judged(image)
+    return [explain_place(image, result, judged, config, *place) for place in places]
+
+
+def test_a_found_ball_a_washed_out_one_and_a_square():
+    image = floor()
+    image = draw_ball(image, 160.0, 240.0, 30.0)
+    image = draw_ball(image, 330.0, 240.0, 30.0, colour=PALE_BGR)
+    image = draw_box(image, 460, 200, 540, 280, (40, 225, 190))  # felt-coloured, square
+    found, pale, square = explained(to_uint8(image), [(160.0, 240.0, 30.0), (330.0, 240.0, 30.0),
+                                                      (500.0, 240.0, 40.0)])
+    assert found["found"] is not None and abs(found["found"]["radius_px"] - 30.0) < 2.0
+    assert summary(found).startswith("found at (160, 240)")
+    # no colour mask on the pale ball: its saturation is what fails
+    assert pale["found"] is None and pale["candidate"] is None and pale["colour"]["mask_share"] == 0.0
+    assert pale["colour"]["saturation"] < 60 and 30 < pale["colour"]["hue"] < 45
+    assert [reason.split()[0] for reason in pale["colour"]["failed"]] == ["saturation"]
+    assert "saturation" in summary(pale) and summary(pale).startswith("no candidate")
+    # the square is colour all over, and its candidate circle fails on shape
+    assert square["found"] is None and square["colour"]["failed"] == []
+    assert square["colour"]["mask_share"] == 1.0
+    assert square["candidate"] is not None and square["candidate"]["score"] is None
+    assert square["candidate"]["failed"] and summary(square).startswith("candidate (")
+
+
+def test_without_a_radius_the_place_is_inside_a_ball_or_not():
+    image = to_uint8(draw_ball(floor(), 200.0, 200.0, 25.0))
+    inside, outside = explained(image, [(215.0, 190.0), (300.0, 300.0)])
+    assert inside["found"] is not None
+    assert outside["found"] is None and outside["candidate"] is None
+    assert outside["colour"]["failed"]  # grey floor: neither the hue nor the saturation of felt
+
+
+def test_a_place_outside_the_frame_and_a_grey_frame():
+    image = np.full((120, 160), 90, np.uint8)
+    (far,) = explained(image, [(500.0, 500.0)])
+    assert far["found"] is None and far["candidate"] is None
+    assert far["colour"]["failed"] == ["the place is outside the frame"]
+    assert summary(far) == "no candidate; the place is outside the frame"
