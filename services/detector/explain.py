@@ -36,23 +36,34 @@ def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[J
 
     A ball is found there when a detection's centre lies within half of ``radius`` of the place
     (as ``real_photos`` scores), or without ``radius`` when the place is inside a detection.
-    Returns ``{"u", "v", "found": {u, v, radius_px, score} or None, "colour": {hue, saturation,
-    value, mask_share, failed}, "candidate": {u, v, radius_px, score, failed} or None}``, the
-    candidate being the judged circle nearest the place, one that passed first.
+    Returns ``{"u", "v", "found": {u, v, radius_px, score} or None, "covered_by": {u, v,
+    radius_px, score, offset_px} or None, "colour": {hue, saturation, value, mask_share, failed},
+    "candidate": {u, v, radius_px, score, failed} or None}``: ``covered_by`` is a detection
+    whose disc holds the place though its centre is too far from it to count (when none is
+    found), and the candidate is the judged circle nearest the place, one that passed first.
     """
     image_bgr = check_image(image_bgr)
 
     def near(x: float, y: float, own_radius: float) -> bool:
         return math.hypot(x - u, y - v) <= (radius / 2.0 if radius else own_radius)
 
+    def offset(item) -> float:
+        return math.hypot(item.u - u, item.v - v)
+
     found = [d for d in result.detections if near(d.u, d.v, d.radius_px)]
+    covering = [d for d in result.detections if offset(d) <= d.radius_px]
     candidates = [c for c in judged if near(c.u, c.v, c.radius_px)]
-    candidates.sort(key=lambda c: (c.score is None, math.hypot(c.u - u, c.v - v)))
-    best = min(found, key=lambda d: math.hypot(d.u - u, d.v - v)) if found else None
+    candidates.sort(key=lambda c: (c.score is None, offset(c)))
+    best = min(found, key=offset) if found else None
+    cover = min(covering, key=offset) if covering and best is None else None
     return {
         "u": u, "v": v,
         "found": None if best is None else {"u": round(best.u, 1), "v": round(best.v, 1),
                                             "radius_px": round(best.radius_px, 1), "score": best.score},
+        # (without a radius a detection holding the place is a find, so only with one)
+        "covered_by": None if cover is None else {
+            "u": round(cover.u, 1), "v": round(cover.v, 1), "radius_px": round(cover.radius_px, 1),
+            "score": cover.score, "offset_px": round(offset(cover), 1)},
         "colour": colour_at(image_bgr, result.mask, config, u, v, radius / 2.0 if radius else PLACE_REACH),
         "candidate": None if not candidates else {
             "u": round(candidates[0].u, 1), "v": round(candidates[0].v, 1),
@@ -101,11 +112,17 @@ def colour_at(image_bgr: np.ndarray, mask: np.ndarray, config: DetectorConfig, u
 
 
 def summary(explanation: dict) -> str:
-    """One line: found, or the first reason it was not (the candidate's failed checks, or the
-    colour's when there is no candidate)."""
+    """One line: found; or the first reason it was not: the candidate's failed checks, or when
+    there is no candidate, a detection off centre around the place, or the colour's tests."""
     found, colour, candidate = explanation["found"], explanation["colour"], explanation["candidate"]
     if found is not None:
         return f"found at ({found['u']:.0f}, {found['v']:.0f}), radius {found['radius_px']:.1f} px"
+    cover = explanation["covered_by"]
+    if cover is not None and candidate is None:
+        return (f"inside the detection at ({cover['u']:.0f}, {cover['v']:.0f}), radius "
+                f"{cover['radius_px']:.1f} px, whose centre is {cover['offset_px']:.0f} px away, more "
+                "than half the ball's radius (a circle off the ball: around a neighbour too, or "
+                "the neighbour's)")
     if candidate is not None:
         where = f"candidate ({candidate['u']:.0f}, {candidate['v']:.0f}), radius {candidate['radius_px']:.1f} px"
         if candidate["score"] is not None:

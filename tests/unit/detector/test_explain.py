@@ -3,7 +3,7 @@
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector
+from balltrack.services.detector.detector import BallDetector, Detection, DetectionResult
 from balltrack.services.detector.explain import explain_place, summary
 from tests.unit.detector.drawing import draw_ball, draw_box, floor, to_uint8
 
@@ -51,3 +51,21 @@ def test_a_place_outside_the_frame_and_a_grey_frame():
     assert far["found"] is None and far["candidate"] is None
     assert far["colour"]["failed"] == ["the place is outside the frame"]
     assert summary(far) == "no candidate; the place is outside the frame"
+
+
+def test_a_detection_off_centre_around_the_place_is_named():
+    config = DetectorConfig()
+    image = to_uint8(floor(200, 160))
+    result = DetectionResult(detections=[Detection(u=100.0, v=80.0, radius_px=30.0, score=0.9)],
+                             mask=np.zeros((160, 200), np.uint8))
+    # a labelled ball of radius 12 px centred 18 px from the detection's centre: not found
+    # (found means within 6 px), but inside the detection's disc
+    explanation = explain_place(image, result, [], config, 118.0, 80.0, 12.0)
+    assert explanation["found"] is None
+    assert explanation["covered_by"] == {"u": 100.0, "v": 80.0, "radius_px": 30.0, "score": 0.9,
+                                         "offset_px": 18.0}
+    assert summary(explanation).startswith("inside the detection at (100, 80), radius 30.0 px, "
+                                           "whose centre is 18 px away")
+    near = explain_place(image, result, [], config, 103.0, 80.0, 12.0)
+    assert near["found"] is not None and near["covered_by"] is None
+    assert explain_place(image, result, [], config, 160.0, 80.0, 12.0)["covered_by"] is None
