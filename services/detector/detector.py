@@ -163,9 +163,10 @@ class BallDetector:
         work_width = self.config.work_width
         if not work_width or width <= work_width:
             return None
-        return work_width, max(8, round(height * work_width / width))
+        scale = work_width / width
+        return work_width, max(8, round(height * scale))
 
-    def detect_judged(self, image_bgr: np.ndarray) -> tuple[DetectionResult, list["JudgedCandidate"]]:
+    def detect_judged(self, image_bgr: np.ndarray) -> tuple[DetectionResult, list[JudgedCandidate]]:
         """``detect``, and every candidate circle it judged on the way, once each (its last
         judgement), in pixels of the input frame: what explains a ball that was not found
         (see ``explain.py``)."""
