@@ -83,13 +83,17 @@ def _box_contains(box: dict, u: float, v: float) -> bool:
     return box["x"] <= u <= box["x"] + box["w"] and box["y"] <= v <= box["y"] + box["h"]
 
 
+def counted_balls(boxes: list[dict], min_ball_px: int = MIN_BALL_PX) -> list[tuple[float, float, float]]:
+    """The centre (u, v) and radius of each labelled ball that counts (see the module's scoring)."""
+    return [(box["x"] + box["w"] / 2.0, box["y"] + box["h"] / 2.0, max(box["w"], box["h"]) / 2.0)
+            for box in boxes if max(box["w"], box["h"]) >= min_ball_px]
+
+
 def score_image(boxes: list[dict], detections: list, min_ball_px: int = MIN_BALL_PX) -> dict:
     """Score one image's detections (objects with ``u``, ``v``) against its labelled boxes."""
-    counted = [box for box in boxes if max(box["w"], box["h"]) >= min_ball_px]
+    counted = counted_balls(boxes, min_ball_px)
     found = 0
-    for box in counted:
-        centre_u, centre_v = box["x"] + box["w"] / 2.0, box["y"] + box["h"] / 2.0
-        radius = max(box["w"], box["h"]) / 2.0
+    for centre_u, centre_v, radius in counted:
         if any(math.hypot(d.u - centre_u, d.v - centre_v) <= radius / 2.0 for d in detections):
             found += 1
     false_positives = sum(1 for d in detections if not any(_box_contains(b, d.u, d.v) for b in boxes))
@@ -256,12 +260,8 @@ def missed_balls(folder, config: DetectorConfig) -> list[dict]:
         if image is None:
             raise FileNotFoundError(f"{folder / name}: missing or not an image")
         result, judged = detector.detect_judged(image)
-        for box in labels[name]:
-            radius = max(box["w"], box["h"]) / 2.0
-            if 2.0 * radius < MIN_BALL_PX:
-                continue
-            explanation = explain_place(image, result, judged, config, box["x"] + box["w"] / 2.0,
-                                        box["y"] + box["h"] / 2.0, radius)
+        for centre_u, centre_v, radius in counted_balls(labels[name]):
+            explanation = explain_place(image, result, judged, config, centre_u, centre_v, radius)
             if explanation["found"] is None:
                 missed.append({"file": name, "u": explanation["u"], "v": explanation["v"],
                                "radius_px": radius, "summary": summary(explanation),
