@@ -1,11 +1,15 @@
 """``balltrack detect IMAGE...``: the detector offline, one JSON line per image; with ``--explain
-U,V``, why a ball at that place was or was not found (see services/detector/explain.py)."""
+U,V``, why a ball at that place was or was not found (see services/detector/explain.py).
+
+SIGINT or SIGTERM stops it after the image in hand (its line printed whole), with status 0.
+"""
 
 import json
 import math
 import sys
 
 from balltrack.common.config import ConfigError, load_config
+from balltrack.common.shutdown import stop_on_signals
 
 
 def command_detect(args) -> int:
@@ -22,8 +26,11 @@ def command_detect(args) -> int:
         print(f"balltrack detect: {error}", file=sys.stderr)
         return 2
     detector = BallDetector(config)
+    stop = stop_on_signals()
     status = 0
     for path in args.images:
+        if stop.is_set():
+            break
         image = cv2.imread(path, cv2.IMREAD_COLOR)
         if image is None:
             print(json.dumps({"file": path, "error": "cannot read image"}), flush=True)
@@ -52,7 +59,6 @@ def parse_place(text: str) -> tuple[float, float]:
     if not (math.isfinite(u) and math.isfinite(v)):
         raise ValueError(f"--explain: U and V must be finite numbers, got {text!r}")
     return u, v
-
 
 
 def register(commands) -> None:

@@ -61,6 +61,19 @@ def test_detect_on_real_photos_finds_balls():
     assert any(abs(ball["u"] - 227) < 18 and abs(ball["v"] - 251.5) < 18 for ball in line["balls"])
 
 
+def test_detect_stops_on_sigterm_after_a_whole_line(tmp_path, log_dir):
+    photo = tmp_path / "b.png"
+    cv2.imwrite(str(photo), draw_ball(floor_image(), 200.0, 300.0, 25.0))
+    count = 5000  # (several seconds of work at the least: SIGTERM comes long before the end)
+    detect = Process([sys.executable, "-m", "balltrack", "detect", *[str(photo)] * count],
+                     log_dir / "detect.log")
+    detect.wait_for_output('"balls"', timeout=120)
+    assert detect.stop() == 0
+    lines = detect.output().splitlines()
+    assert 1 <= len(lines) < count
+    assert all(len(json.loads(line)["balls"]) == 1 for line in lines)
+
+
 @pytest.mark.parametrize("arguments, reason", [
     (["detect", "x.png", "--set", "min_radius=-1"], "min_radius"),
     (["detect", "x.png", "--set", "bogus=1"], "bogus: unknown parameter"),
