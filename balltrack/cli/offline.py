@@ -1,12 +1,17 @@
-"""``balltrack detect IMAGE...``: the detector offline, one JSON line per image; with ``--explain
-U,V``, why a ball at that place was or was not found (see services/detector/explain.py).
+"""The detector offline.
 
-SIGINT or SIGTERM stops it after the image in hand (its line printed whole), with status 0.
+``balltrack detect IMAGE...``: one JSON line per image; with ``--explain U,V``, why a ball at
+that place was or was not found (see services/detector/explain.py). SIGINT or SIGTERM stops it
+after the image in hand (its line printed whole), with status 0.
+
+``balltrack fit-colour``: the colour range of balls marked on frames, as a detector parameter
+file (see services/detector/colour_fit.py).
 """
 
 import json
 import math
 import sys
+from pathlib import Path
 
 from balltrack.common.config import ConfigError, load_config
 from balltrack.common.shutdown import stop_on_signals
@@ -61,6 +66,87 @@ def parse_place(text: str) -> tuple[float, float]:
     return u, v
 
 
+def command_fit_colour(args) -> int:
+    import cv2
+    import numpy as np
+
+    from balltrack.experiments.real_photos import counted_balls
+    from balltrack.services.detector.colour_fit import colour_samples, fit_colour
+    from balltrack.services.detector.config import DetectorConfig
+
+    def fail(message: str) -> int:
+        print(f"balltrack fit-colour: {message}", file=sys.stderr)
+        return 2
+
+    try:
+        config = load_config(DetectorConfig, args.config, args.overrides, section="detector")
+        boxes = [parse_box(text) for text in args.boxes]
+        images = marked_images(args.images, boxes, args.labels)
+    except (ConfigError, ValueError) as error:
+        return fail(str(error))
+    balls, others, count = [], [], 0
+    for path, marked in images:
+        try:  # (read here: cv2.imread would add a warning of its own to the one-line error)
+            image = cv2.imdecode(np.frombuffer(path.read_bytes(), np.uint8), cv2.IMREAD_COLOR)
+        except OSError as error:
+            return fail(f"{path}: cannot read image ({error.strerror or error})")
+        if image is None:
+            return fail(f"{path}: cannot read image (not an image OpenCV decodes)")
+        circles = counted_balls(marked, min_ball_px=0)
+        ball, other = colour_samples(image, circles, config)
+        balls.append(ball)
+        others.append(other)
+        count += len(circles)
+    try:
+        fit = fit_colour(np.concatenate(balls), np.concatenate(others), config, count)
+    except ValueError as error:
+        return fail(str(error))
+    print(f"# balltrack fit-colour: {fit.balls} balls ({fit.ball_pixels:,} pixels) in {len(images)} images")
+    print(f"# this range admits {100 * fit.ball_admitted:.1f} % of the balls' pixels and "
+          f"{100 * fit.other_admitted:.1f} % of the frames' other pixels;")
+    print(f"# the configured one (hue {config.h_min}-{config.h_max}, saturation >= {config.s_min}) "
+          f"{100 * fit.ball_admitted_before:.1f} % and {100 * fit.other_admitted_before:.1f} %")
+    print("[detector]")
+    for name, value in fit.changes().items():
+        print(f"{name} = {value}")
+    return 0
+
+
+def parse_box(text: str) -> dict:
+    """``X,Y,W,H`` (pixels, top-left corner) as a box; ValueError with a one-line reason."""
+    try:
+        x, y, width, height = (float(part) for part in text.split(","))
+    except ValueError:
+        raise ValueError(f"--box: expected X,Y,W,H in pixels (e.g. 180,200,60,60), got {text!r}") from None
+    if not all(map(math.isfinite, (x, y, width, height))) or width <= 0 or height <= 0:
+        raise ValueError(f"--box: X and Y must be finite, W and H positive, got {text!r}")
+    return {"x": x, "y": y, "w": width, "h": height}
+
+
+def marked_images(images: list[str], boxes: list[dict], labels: str | None) -> list[tuple[Path, list[dict]]]:
+    """(image, its boxes) pairs: every image given with the ``--box`` boxes, or, from a labels
+    file (``{"file name": [{"x", "y", "w", "h"}, ...]}``, the photo sets' format), every image it
+    lists beside it; ValueError with a one-line reason when neither or both are given."""
+    if labels is None:
+        if not images or not boxes:
+            raise ValueError("give images and --box X,Y,W,H (the balls in them), or --labels FILE")
+        return [(Path(image), boxes) for image in images]
+    if images or boxes:
+        raise ValueError("--labels lists the images and their boxes: give no images or --box with it")
+    try:
+        listed = json.loads(Path(labels).read_text())
+        pairs = [(Path(labels).parent / name, [dict(box, x=float(box["x"]), y=float(box["y"]),
+                                                    w=float(box["w"]), h=float(box["h"])) for box in marked])
+                 for name, marked in listed.items()]
+    except OSError as error:
+        raise ValueError(f"{labels}: cannot read ({error.strerror or error})") from None
+    except (ValueError, TypeError, KeyError, AttributeError):
+        raise ValueError(f"{labels}: expected {{\"image\": [{{\"x\", \"y\", \"w\", \"h\"}}, ...]}}") from None
+    if not pairs:
+        raise ValueError(f"{labels}: lists no images")
+    return pairs
+
+
 def register(commands) -> None:
     detect = commands.add_parser("detect", help="run the detector offline on image files")
     detect.add_argument("images", nargs="+", metavar="IMAGE")
@@ -72,3 +158,13 @@ def register(commands) -> None:
                              "against the colour tests, and the checks the candidate circle there "
                              "failed (repeatable)")
     detect.set_defaults(handler=command_detect)
+    fit = commands.add_parser("fit-colour", help="the colour range of balls marked on frames, as detector parameters")
+    fit.add_argument("images", nargs="*", metavar="IMAGE")
+    fit.add_argument("--box", action="append", default=[], dest="boxes", metavar="X,Y,W,H",
+                     help="a ball in each IMAGE: its box in pixels, top-left corner (repeatable)")
+    fit.add_argument("--labels", metavar="FILE",
+                     help="a labels.json of the photo sets' format: the images beside it and their boxes")
+    fit.add_argument("--config", metavar="FILE", help="TOML parameter file (the range it is compared with)")
+    fit.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
+                     help="a detector parameter, repeatable")
+    fit.set_defaults(handler=command_fit_colour)

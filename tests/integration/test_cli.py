@@ -5,6 +5,7 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
 
 import cv2
 import pytest
@@ -79,6 +80,12 @@ def test_detect_stops_on_sigterm_after_a_whole_line(tmp_path, log_dir):
     (["detect", "x.png", "--set", "bogus=1"], "bogus: unknown parameter"),
     (["detect", "x.png", "--explain", "412"], "expected U,V"),
     (["detect", "x.png", "--explain", "inf,3"], "finite"),
+    (["fit-colour", "x.png"], "--box"),
+    (["fit-colour", "x.png", "--box", "1,2,3"], "expected X,Y,W,H"),
+    (["fit-colour", "x.png", "--box", "1,2,0,3"], "positive"),
+    (["fit-colour", "x.png", "--box", "1,2,3,3"], "x.png: cannot read image"),
+    (["fit-colour", "--labels", "missing.json"], "cannot read"),
+    (["fit-colour", "--labels", "README.md"], "expected {"),
     (["status", "--namespace", "a*b"], "namespace"),
     (["hz"], "required"),
     (["sim", "explode"], "invalid choice"),
@@ -87,6 +94,24 @@ def test_bad_arguments_give_one_line_and_status_2(arguments, reason):
     result = balltrack(*arguments)
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1 and reason in result.stderr, result.stderr
+
+
+def test_fit_colour_writes_a_parameter_file_the_detector_reads(tmp_path):
+    # Orange balls, which the default (tennis) range does not admit; the fitted file finds them.
+    image = draw_ball(draw_ball(floor_image(), 200.0, 300.0, 25.0, colour=(30, 110, 235)),
+                      450.0, 200.0, 20.0, colour=(30, 110, 235))
+    photo = tmp_path / "orange.png"
+    cv2.imwrite(str(photo), image)
+    before = balltrack("detect", str(photo))
+    assert json.loads(before.stdout)["balls"] == []
+    fitted = balltrack("fit-colour", str(photo), "--box", "175,275,50,50", "--box", "430,180,40,40")
+    assert fitted.returncode == 0, fitted.stderr
+    settings = tomllib.loads(fitted.stdout)["detector"]
+    assert settings["h_min"] <= 12 <= settings["h_max"]
+    (tmp_path / "orange.toml").write_text(fitted.stdout)
+    after = balltrack("detect", str(photo), "--config", str(tmp_path / "orange.toml"))
+    balls = sorted((round(ball["u"]), round(ball["v"])) for ball in json.loads(after.stdout)["balls"])
+    assert balls == [(200, 300), (450, 200)]
 
 
 def test_unreadable_image_is_reported_not_fatal(tmp_path):

@@ -1,0 +1,160 @@
+"""The colour mask's hue and saturation range fitted to balls marked on a user's own frames.
+
+The default range (``h_min``-``h_max`` 25-50, ``s_min`` 80) is that of a yellow-green tennis
+ball under white light. Another ball (orange, red, blue), a camera with another white balance,
+or a lamp's colour needs another range, and guessing it from a colour picker is slow. Given
+frames and where the balls are in them, the range is read off the balls' own pixels:
+
+- the pixels are those the mask would classify: the frame at the detector's work size, blurred
+  by ``blur_kernel``, in HSV; of each ball, the disc of BALL_DISC of its radius (its rim mixes
+  with the background);
+- pixels below FIT_SATURATION (a seam, a logo, a highlight) or ``min_chroma`` (grey: their hue is
+  noise) do not shape the range;
+- the hue range leaves HUE_TAIL of those pixels out at each end, on the hue circle (a red
+  ball's range wraps through 0, ``h_min > h_max``), and keeps ``hue_margin`` and a unit more
+  on each side of their median hue, which a candidate's mean colour needs (``checks.judge``);
+  ``s_min`` leaves SATURATION_TAIL out below.
+
+The fit says how much of the balls' pixels (all of their discs) each range admits, and how much
+of the frames' other pixels: a range that admits the floor, the walls or the plants gives the
+detector clutter to reject (see ``failed_checks``), and one that misses the balls' shaded side
+loses them. The value test (``v_min``, on CLAHE-equalised brightness, relative to the frame) is
+not fitted. Arrays in, a ``ColourFit`` out; ``balltrack fit-colour`` is the command.
+"""
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.detector import BallDetector
+
+# Of a ball, the disc of this share of its radius is sampled.
+BALL_DISC = 0.8
+# Around each ball, what lies within this share of its radius (and OTHER_MARGIN px) is neither
+# ball nor background: its rim, its shadow, a box drawn a little small.
+OTHER_CLEARANCE = 1.3
+OTHER_MARGIN = 3
+# The background is sampled on every this many pixels each way (a frame's worth of pixels is
+# far more than its statistics need).
+OTHER_STEP = 4
+# Pixels below this saturation do not shape the range (the seam, logos, a washed-out highlight).
+FIT_SATURATION = 30
+# Shares of the shaping pixels left out at each end of the hue range and below s_min.
+HUE_TAIL = 0.025
+SATURATION_TAIL = 0.05
+# Fewer shaping pixels than this are no basis for a range.
+MIN_PIXELS = 50
+# Balls of a smaller radius (px, in the input frame) are skipped: their discs are mostly rim.
+MIN_RADIUS = 4.0
+# A hue spread wider than this (OpenCV hue units, of 180) is not one colour.
+MAX_HUE_WIDTH = 90
+
+
+@dataclass(frozen=True)
+class ColourFit:
+    """A fitted range, and what it and the configured one admit (shares 0-1)."""
+
+    h_min: int
+    h_max: int
+    s_min: int
+    balls: int                 # balls sampled
+    ball_pixels: int           # pixels of their discs
+    ball_admitted: float       # share of those the fitted range admits
+    ball_admitted_before: float  # ... and the configured range
+    other_pixels: int          # background pixels sampled
+    other_admitted: float
+    other_admitted_before: float
+
+    def changes(self) -> dict[str, int]:
+        """The detector parameters the fit sets."""
+        return {"h_min": self.h_min, "h_max": self.h_max, "s_min": self.s_min}
+
+
+def colour_samples(image_bgr: np.ndarray, circles: list[tuple[float, float, float]],
+                   config: DetectorConfig) -> tuple[np.ndarray, np.ndarray]:
+    """HSV pixels (N x 3, uint8) of the balls' discs and of the rest of one frame, as the colour
+    mask sees them; ``circles``: (u, v, radius) of each ball in pixels of ``image_bgr``."""
+    height, width = image_bgr.shape[:2]
+    scale = scale_y = 1.0
+    work = image_bgr
+    work_size = BallDetector(config).work_size(width, height)
+    if work_size is not None:
+        scale, scale_y = work_size[0] / width, work_size[1] / height
+        work = cv2.resize(image_bgr, work_size, interpolation=cv2.INTER_AREA)
+    if config.blur_kernel > 1:
+        work = cv2.GaussianBlur(work, (config.blur_kernel, config.blur_kernel), 0)
+    hsv = cv2.cvtColor(work, cv2.COLOR_BGR2HSV)
+    ball = np.zeros(hsv.shape[:2], np.uint8)
+    near = np.zeros(hsv.shape[:2], np.uint8)
+    for u, v, radius in circles:
+        if radius < MIN_RADIUS:
+            continue
+        # (whole coordinates are pixel centres: see detector.in_input_frame)
+        centre = (int(round((u + 0.5) * scale - 0.5)), int(round((v + 0.5) * scale_y - 0.5)))
+        cv2.circle(ball, centre, max(1, int(BALL_DISC * radius * scale)), 255, -1)
+        cv2.circle(near, centre, int(math.ceil(OTHER_CLEARANCE * radius * scale + OTHER_MARGIN)), 255, -1)
+    background = np.zeros_like(near)
+    background[::OTHER_STEP, ::OTHER_STEP] = 255
+    background[near > 0] = 0
+    return hsv[ball > 0], hsv[background > 0]
+
+
+def admitted(hsv: np.ndarray, h_min: int, h_max: int, s_min: int, s_max: int, min_chroma: float) -> np.ndarray:
+    """Which of the HSV pixels (N x 3) pass the hue, saturation and chroma tests of a range."""
+    hue, saturation = hsv[:, 0].astype(np.int32), hsv[:, 1].astype(np.int32)
+    in_hue = (hue >= h_min) & (hue <= h_max) if h_min <= h_max else (hue >= h_min) | (hue <= h_max)
+    return in_hue & (saturation >= s_min) & (saturation <= s_max) & chroma_passes(hsv, min_chroma)
+
+
+def chroma_passes(hsv: np.ndarray, min_chroma: float) -> np.ndarray:
+    """Which of the HSV pixels (N x 3) pass the mask's chroma floor, as the mask tests it: chroma
+    (max - min channel) is S * V / 255 rounded to a whole unit, at least ``min_chroma`` rounded."""
+    chroma = np.rint(hsv[:, 1].astype(np.float64) * hsv[:, 2] / 255.0)
+    return chroma >= max(0, math.ceil(min_chroma - 0.5))
+
+
+def fit_colour(ball: np.ndarray, other: np.ndarray, config: DetectorConfig, balls: int) -> ColourFit:
+    """The hue and saturation range of the balls' pixels ``ball`` (HSV, N x 3) and what it and
+    ``config``'s range admit of them and of ``other``, the background; ValueError with a
+    one-line reason when the pixels hold no single colour."""
+    hue = ball[:, 0].astype(np.float64)
+    saturation = ball[:, 1].astype(np.float64)
+    shaping = (saturation >= FIT_SATURATION) & chroma_passes(ball, config.min_chroma)
+    if np.count_nonzero(shaping) < MIN_PIXELS:
+        raise ValueError(f"only {np.count_nonzero(shaping)} of the balls' {len(ball)} pixels are coloured "
+                         f"(saturation >= {FIT_SATURATION}); at least {MIN_PIXELS} are needed")
+    # On the hue circle (180 units): deviations from the circular mean, then from their median.
+    angles = hue[shaping] * (2.0 * math.pi / 180.0)
+    centre = math.atan2(float(np.sin(angles).mean()), float(np.cos(angles).mean())) * 180.0 / (2.0 * math.pi)
+    deviation = (hue[shaping] - centre + 90.0) % 180.0 - 90.0
+    centre += float(np.median(deviation))
+    deviation = (hue[shaping] - centre + 90.0) % 180.0 - 90.0
+    low, high = np.quantile(deviation, [HUE_TAIL, 1.0 - HUE_TAIL])
+    # A candidate's mean colour must lie hue_margin inside the range (checks.judge): the balls'
+    # central hue keeps that much room and a unit more, however evenly coloured they are.
+    room = config.hue_margin + 1.0
+    low, high = min(low, -room), max(high, room)
+    if high - low > MAX_HUE_WIDTH:
+        raise ValueError(f"the balls' hues spread over {high - low:.0f} of 180 units: not one colour "
+                         "(are the boxes on the balls?)")
+    h_min = int(math.floor(centre + low)) % 180
+    h_max = int(math.ceil(centre + high)) % 180
+    in_hue = (deviation >= low) & (deviation <= high)
+    s_min = max(FIT_SATURATION, int(math.floor(np.quantile(saturation[shaping][in_hue], SATURATION_TAIL))))
+    s_min = min(s_min, config.s_max)
+
+    def share(pixels: np.ndarray, low_hue: int, high_hue: int, low_saturation: int) -> float:
+        if not len(pixels):
+            return 0.0
+        passing = admitted(pixels, low_hue, high_hue, low_saturation, config.s_max, config.min_chroma)
+        return float(np.count_nonzero(passing)) / len(pixels)
+
+    return ColourFit(h_min=h_min, h_max=h_max, s_min=s_min, balls=balls, ball_pixels=len(ball),
+                     ball_admitted=share(ball, h_min, h_max, s_min),
+                     ball_admitted_before=share(ball, config.h_min, config.h_max, config.s_min),
+                     other_pixels=len(other),
+                     other_admitted=share(other, h_min, h_max, s_min),
+                     other_admitted_before=share(other, config.h_min, config.h_max, config.s_min))
