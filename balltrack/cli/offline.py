@@ -71,7 +71,7 @@ def command_fit_colour(args) -> int:
     import numpy as np
 
     from balltrack.experiments.real_photos import counted_balls
-    from balltrack.services.detector.colour_fit import colour_samples, fit_colour
+    from balltrack.services.detector.colour_fit import MIN_RADIUS, colour_samples, fit_colour
     from balltrack.services.detector.config import DetectorConfig
 
     def fail(message: str) -> int:
@@ -92,7 +92,7 @@ def command_fit_colour(args) -> int:
             return fail(f"{path}: cannot read image ({error.strerror or error})")
         if image is None:
             return fail(f"{path}: cannot read image (not an image OpenCV decodes)")
-        circles = counted_balls(marked, min_ball_px=0)
+        circles = [circle for circle in counted_balls(marked, min_ball_px=0) if circle[2] >= MIN_RADIUS]
         ball, other = colour_samples(image, circles, config)
         balls.append(ball)
         others.append(other)
