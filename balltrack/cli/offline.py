@@ -87,9 +87,11 @@ def command_fit_colour(args) -> int:
     balls, others, count = [], [], 0
     for path, marked in images:
         try:  # (read here: cv2.imread would add a warning of its own to the one-line error)
-            image = cv2.imdecode(np.frombuffer(path.read_bytes(), np.uint8), cv2.IMREAD_COLOR)
+            data = path.read_bytes()
         except OSError as error:
             return fail(f"{path}: cannot read image ({error.strerror or error})")
+        # (imdecode asserts on an empty buffer)
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
         if image is None:
             return fail(f"{path}: cannot read image (not an image OpenCV decodes)")
         circles = [circle for circle in counted_balls(marked, min_ball_px=0) if circle[2] >= MIN_RADIUS]

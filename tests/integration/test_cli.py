@@ -114,6 +114,14 @@ def test_fit_colour_writes_a_parameter_file_the_detector_reads(tmp_path):
     assert balls == [(200, 300), (450, 200)]
 
 
+@pytest.mark.parametrize("content", [b"", b"not an image\n"])
+def test_fit_colour_rejects_a_file_that_is_no_image(tmp_path, content):
+    (tmp_path / "bad.png").write_bytes(content)
+    result = balltrack("fit-colour", str(tmp_path / "bad.png"), "--box", "1,2,3,3")
+    assert result.returncode == 2
+    assert result.stderr.strip() == f"balltrack fit-colour: {tmp_path / 'bad.png'}: cannot read image (not an image OpenCV decodes)"
+
+
 def test_unreadable_image_is_reported_not_fatal(tmp_path):
     good = tmp_path / "good.png"
     cv2.imwrite(str(good), floor_image(64, 48))
