@@ -71,7 +71,7 @@ def command_fit_colour(args) -> int:
     import numpy as np
 
     from balltrack.experiments.real_photos import counted_balls
-    from balltrack.services.detector.colour_fit import MIN_RADIUS, colour_samples, fit_colour
+    from balltrack.services.detector.colour_fit import ColourSamples, colour_samples, fit_colour
     from balltrack.services.detector.config import DetectorConfig
 
     def fail(message: str) -> int:
@@ -84,7 +84,7 @@ def command_fit_colour(args) -> int:
         images = marked_images(args.images, boxes, args.labels)
     except (ConfigError, ValueError) as error:
         return fail(str(error))
-    balls, others, count = [], [], 0
+    samples = []
     for path, marked in images:
         try:  # (read here: cv2.imread would add a warning of its own to the one-line error)
             data = path.read_bytes()
@@ -94,13 +94,9 @@ def command_fit_colour(args) -> int:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
         if image is None:
             return fail(f"{path}: cannot read image (not an image OpenCV decodes)")
-        circles = [circle for circle in counted_balls(marked, min_ball_px=0) if circle[2] >= MIN_RADIUS]
-        ball, other = colour_samples(image, circles, config)
-        balls.append(ball)
-        others.append(other)
-        count += len(circles)
+        samples.append(colour_samples(image, counted_balls(marked, min_ball_px=0), config))
     try:
-        fit = fit_colour(np.concatenate(balls), np.concatenate(others), config, count)
+        fit = fit_colour(ColourSamples.joined(samples), config)
     except ValueError as error:
         return fail(str(error))
     print(f"# balltrack fit-colour: {fit.balls} balls ({fit.ball_pixels:,} pixels) in {len(images)} images")

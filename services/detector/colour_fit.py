@@ -12,8 +12,10 @@ frames and where the balls are in them, the range is read off the balls' own pix
   noise) do not shape the range;
 - the hue range leaves HUE_TAIL of those pixels out at each end, on the hue circle (a red
   ball's range wraps through 0, ``h_min > h_max``), and keeps ``hue_margin`` and a unit more
-  on each side of their median hue, which a candidate's mean colour needs (``checks.judge``);
-  ``s_min`` leaves SATURATION_TAIL out below.
+  on each side of their median hue and of the balls' own mean colours (HUE_TAIL of the balls
+  left out at each end): a candidate's mean colour must lie ``hue_margin`` inside the range
+  (``checks.judge``), and a ball in one frame's light may have a cast that puts its mean near
+  the pixels' tail; ``s_min`` leaves SATURATION_TAIL out below.
 
 The fit says how much of the balls' pixels (all of their discs) each range admits, and how much
 of the frames' other pixels: a range that admits the floor, the walls or the plants gives the
@@ -23,11 +25,12 @@ not fitted. Arrays in, a ``ColourFit`` out; ``balltrack fit-colour`` is the comm
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
+from balltrack.services.detector.checks import mean_hue
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 
@@ -45,12 +48,36 @@ FIT_SATURATION = 30
 # Shares of the shaping pixels left out at each end of the hue range and below s_min.
 HUE_TAIL = 0.025
 SATURATION_TAIL = 0.05
-# Fewer shaping pixels than this are no basis for a range.
+# Fewer shaping pixels than this are no basis for a range, and of one ball no basis for its
+# mean colour.
 MIN_PIXELS = 50
+MIN_BALL_PIXELS = 10
 # Balls of a smaller radius (px, in the input frame) are skipped: their discs are mostly rim.
 MIN_RADIUS = 4.0
 # A hue spread wider than this (OpenCV hue units, of 180) is not one colour.
 MAX_HUE_WIDTH = 90
+
+
+@dataclass(frozen=True)
+class ColourSamples:
+    """Pixels of marked balls' discs and of the rest of frames, HSV (N x 3, uint8) as the colour
+    mask sees them, and each ball's mean colour."""
+
+    ball: np.ndarray
+    other: np.ndarray
+    # per ball with at least MIN_BALL_PIXELS shaping pixels: the hue (0-180) of their mean colour
+    # in the unblurred frame, as ``checks.colour_stats`` reads a candidate's
+    ball_hues: list[float] = field(default_factory=list)
+    balls: int = 0  # balls sampled
+
+    @staticmethod
+    def joined(samples: "list[ColourSamples]") -> "ColourSamples":
+        """The samples of several frames as one."""
+        empty = np.zeros((0, 3), np.uint8)
+        return ColourSamples(ball=np.concatenate([sample.ball for sample in samples] or [empty]),
+                             other=np.concatenate([sample.other for sample in samples] or [empty]),
+                             ball_hues=[hue for sample in samples for hue in sample.ball_hues],
+                             balls=sum(sample.balls for sample in samples))
 
 
 @dataclass(frozen=True)
@@ -74,9 +101,10 @@ class ColourFit:
 
 
 def colour_samples(image_bgr: np.ndarray, circles: list[tuple[float, float, float]],
-                   config: DetectorConfig) -> tuple[np.ndarray, np.ndarray]:
-    """HSV pixels (N x 3, uint8) of the balls' discs and of the rest of one frame, as the colour
-    mask sees them; ``circles``: (u, v, radius) of each ball in pixels of ``image_bgr``."""
+                   config: DetectorConfig) -> ColourSamples:
+    """The pixels of the balls' discs and of the rest of one frame, and each ball's mean colour;
+    ``circles``: (u, v, radius) of each ball in pixels of ``image_bgr`` (those under MIN_RADIUS
+    are skipped)."""
     height, width = image_bgr.shape[:2]
     scale = scale_y = 1.0
     work = image_bgr
@@ -84,22 +112,38 @@ def colour_samples(image_bgr: np.ndarray, circles: list[tuple[float, float, floa
     if work_size is not None:
         scale, scale_y = work_size[0] / width, work_size[1] / height
         work = cv2.resize(image_bgr, work_size, interpolation=cv2.INTER_AREA)
+    blurred = work
     if config.blur_kernel > 1:
-        work = cv2.GaussianBlur(work, (config.blur_kernel, config.blur_kernel), 0)
-    hsv = cv2.cvtColor(work, cv2.COLOR_BGR2HSV)
+        blurred = cv2.GaussianBlur(work, (config.blur_kernel, config.blur_kernel), 0)
+    hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
     ball = np.zeros(hsv.shape[:2], np.uint8)
     near = np.zeros(hsv.shape[:2], np.uint8)
+    hues, balls = [], 0
     for u, v, radius in circles:
         if radius < MIN_RADIUS:
             continue
+        balls += 1
         # (whole coordinates are pixel centres: see detector.in_input_frame)
         centre = (int(round((u + 0.5) * scale - 0.5)), int(round((v + 0.5) * scale_y - 0.5)))
-        cv2.circle(ball, centre, max(1, int(BALL_DISC * radius * scale)), 255, -1)
+        disc = np.zeros_like(ball)
+        cv2.circle(disc, centre, max(1, int(BALL_DISC * radius * scale)), 255, -1)
+        ball |= disc
         cv2.circle(near, centre, int(math.ceil(OTHER_CLEARANCE * radius * scale + OTHER_MARGIN)), 255, -1)
+        inside = disc > 0
+        shaping = shaping_pixels(hsv[inside], config)
+        if np.count_nonzero(shaping) >= MIN_BALL_PIXELS:
+            hue = mean_hue(work[inside][shaping].mean(axis=0))
+            if hue >= 0:  # (not grey)
+                hues.append(hue)
     background = np.zeros_like(near)
     background[::OTHER_STEP, ::OTHER_STEP] = 255
     background[near > 0] = 0
-    return hsv[ball > 0], hsv[background > 0]
+    return ColourSamples(ball=hsv[ball > 0], other=hsv[background > 0], ball_hues=hues, balls=balls)
+
+
+def shaping_pixels(hsv: np.ndarray, config: DetectorConfig) -> np.ndarray:
+    """Which of the HSV pixels (N x 3) shape the range: coloured (FIT_SATURATION) and not grey."""
+    return (hsv[:, 1] >= FIT_SATURATION) & chroma_passes(hsv, config.min_chroma)
 
 
 def admitted(hsv: np.ndarray, h_min: int, h_max: int, s_min: int, s_max: int, min_chroma: float) -> np.ndarray:
@@ -116,13 +160,14 @@ def chroma_passes(hsv: np.ndarray, min_chroma: float) -> np.ndarray:
     return chroma >= max(0, math.ceil(min_chroma - 0.5))
 
 
-def fit_colour(ball: np.ndarray, other: np.ndarray, config: DetectorConfig, balls: int) -> ColourFit:
-    """The hue and saturation range of the balls' pixels ``ball`` (HSV, N x 3) and what it and
-    ``config``'s range admit of them and of ``other``, the background; ValueError with a
-    one-line reason when the pixels hold no single colour."""
+def fit_colour(samples: ColourSamples, config: DetectorConfig) -> ColourFit:
+    """The hue and saturation range of the balls' pixels and what it and ``config``'s range admit
+    of them and of the background; ValueError with a one-line reason when the pixels hold no
+    single colour."""
+    ball, other = samples.ball, samples.other
     hue = ball[:, 0].astype(np.float64)
     saturation = ball[:, 1].astype(np.float64)
-    shaping = (saturation >= FIT_SATURATION) & chroma_passes(ball, config.min_chroma)
+    shaping = shaping_pixels(ball, config)
     if np.count_nonzero(shaping) < MIN_PIXELS:
         raise ValueError(f"only {np.count_nonzero(shaping)} of the balls' {len(ball)} pixels are coloured "
                          f"(saturation >= {FIT_SATURATION}); at least {MIN_PIXELS} are needed")
@@ -134,9 +179,14 @@ def fit_colour(ball: np.ndarray, other: np.ndarray, config: DetectorConfig, ball
     deviation = (hue[shaping] - centre + 90.0) % 180.0 - 90.0
     low, high = np.quantile(deviation, [HUE_TAIL, 1.0 - HUE_TAIL])
     # A candidate's mean colour must lie hue_margin inside the range (checks.judge): the balls'
-    # central hue keeps that much room and a unit more, however evenly coloured they are.
+    # central hue, and each ball's mean colour, keep that much room and a unit more, however
+    # evenly coloured they are.
     room = config.hue_margin + 1.0
     low, high = min(low, -room), max(high, room)
+    if samples.ball_hues:  # (HUE_TAIL of the balls left out at each end, as of the pixels)
+        offsets = (np.asarray(samples.ball_hues) - centre + 90.0) % 180.0 - 90.0
+        lowest, highest = np.quantile(offsets, [HUE_TAIL, 1.0 - HUE_TAIL])
+        low, high = min(low, lowest - room), max(high, highest + room)
     if high - low > MAX_HUE_WIDTH:
         raise ValueError(f"the balls' hues spread over {high - low:.0f} of 180 units: not one colour "
                          "(are the boxes on the balls?)")
@@ -152,7 +202,7 @@ def fit_colour(ball: np.ndarray, other: np.ndarray, config: DetectorConfig, ball
         passing = admitted(pixels, low_hue, high_hue, low_saturation, config.s_max, config.min_chroma)
         return float(np.count_nonzero(passing)) / len(pixels)
 
-    return ColourFit(h_min=h_min, h_max=h_max, s_min=s_min, balls=balls, ball_pixels=len(ball),
+    return ColourFit(h_min=h_min, h_max=h_max, s_min=s_min, balls=samples.balls, ball_pixels=len(ball),
                      ball_admitted=share(ball, h_min, h_max, s_min),
                      ball_admitted_before=share(ball, config.h_min, config.h_max, config.s_min),
                      other_pixels=len(other),

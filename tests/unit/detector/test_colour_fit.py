@@ -7,12 +7,14 @@ import numpy as np
 import pytest
 
 from balltrack.common.config import replace_config
+from balltrack.services.detector.checks import hue_in_range
 from balltrack.services.detector.colour_fit import admitted, colour_samples, fit_colour
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 from tests.unit.detector.drawing import draw_ball, draw_box, floor, to_uint8
 
 ORANGE_BGR = (30, 110, 235)  # OpenCV hue ~12
+YELLOWER_BGR = (30, 150, 235)  # hue ~18: an orange ball under a yellower light
 RED_BGR = (40, 30, 220)      # hue ~178: a range for it wraps through 0
 GREY_BGR = (150, 150, 150)
 BALLS = [(160.0, 240.0, 30.0), (420.0, 300.0, 22.0)]
@@ -29,8 +31,7 @@ def frame(colour, balls=BALLS, boxes=()):
 
 def fitted(image, config=None, balls=BALLS):
     config = config or DetectorConfig()
-    ball, other = colour_samples(image, balls, config)
-    return fit_colour(ball, other, config, len(balls))
+    return fit_colour(colour_samples(image, balls, config), config)
 
 
 def found(image, config):
@@ -50,6 +51,21 @@ def test_the_fitted_range_finds_balls_the_default_one_does_not(colour, hue):
     assert fit.other_admitted < 0.01  # the grey floor
     assert found(image, DetectorConfig()) == []
     assert found(image, replace_config(DetectorConfig(), fit.changes())) == [(160, 240), (420, 300)]
+
+
+def test_every_balls_mean_colour_lies_hue_margin_inside_the_range():
+    # A small ball with a cast holds a tenth of the pixels: the pixels' hue range ends at its
+    # colour, and a candidate's mean colour must lie hue_margin inside the range (checks.judge).
+    small = (560.0, 120.0, 12.0)
+    image = floor()
+    for u, v, radius in BALLS:
+        image = draw_ball(image, u, v, radius, colour=ORANGE_BGR)
+    image = to_uint8(draw_ball(image, *small, colour=YELLOWER_BGR))
+    config = DetectorConfig()
+    samples = colour_samples(image, BALLS + [small], config)
+    assert len(samples.ball_hues) == 3 and max(samples.ball_hues) > 16
+    fitted_config = replace_config(config, fit_colour(samples, config).changes())
+    assert all(hue_in_range(hue, fitted_config, config.hue_margin) for hue in samples.ball_hues)
 
 
 def test_the_red_range_wraps_through_zero():
@@ -75,7 +91,7 @@ def test_frames_wider_than_the_work_size_are_sampled_as_the_detector_sees_them()
     config = DetectorConfig()
     small = dataclasses.replace(config, work_width=320)
     # (half the work size: the same pixels, a quarter as many)
-    whole, shrunk = colour_samples(image, BALLS, config)[0], colour_samples(image, BALLS, small)[0]
+    whole, shrunk = colour_samples(image, BALLS, config).ball, colour_samples(image, BALLS, small).ball
     assert 0.2 < len(shrunk) / len(whole) < 0.3
     assert abs(float(np.median(whole[:, 0])) - float(np.median(shrunk[:, 0]))) <= 1
 
