@@ -30,7 +30,6 @@ numbers.
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -44,7 +43,7 @@ from balltrack.experiments.detector_speed import PlainDetector
 from balltrack.experiments.photo_variants import VARIANTS, Variant
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
-from balltrack.services.detector.explain import explain_place, summary
+from balltrack.services.detector.explain import explain_place, finds, summary
 
 MIN_BALL_PX = 20
 GOAL_RECALL = 0.90
@@ -94,7 +93,7 @@ def score_image(boxes: list[dict], detections: list, min_ball_px: int = MIN_BALL
     counted = counted_balls(boxes, min_ball_px)
     found = 0
     for centre_u, centre_v, radius in counted:
-        if any(math.hypot(d.u - centre_u, d.v - centre_v) <= radius / 2.0 for d in detections):
+        if any(finds(d.u, d.v, centre_u, centre_v, radius) for d in detections):
             found += 1
     false_positives = sum(1 for d in detections if not any(_box_contains(b, d.u, d.v) for b in boxes))
     return {"labelled": len(counted), "found": found, "false_positives": false_positives}

@@ -28,6 +28,12 @@ from balltrack.services.detector.mask import check_image
 PLACE_REACH = 3.0
 
 
+def finds(u: float, v: float, ball_u: float, ball_v: float, ball_radius: float) -> bool:
+    """Whether a detection centred at (u, v) finds the ball at (ball_u, ball_v): its centre lies
+    within half the ball's radius (how the photo sets are scored, ``experiments/real_photos.py``)."""
+    return math.hypot(u - ball_u, v - ball_v) <= ball_radius / 2.0
+
+
 def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[JudgedCandidate],
                   config: DetectorConfig, u: float, v: float, radius: float | None = None) -> dict:
     """The detector's view of the place (u, v) of a frame (pixels of ``image_bgr``), from one
@@ -45,7 +51,7 @@ def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[J
     image_bgr = check_image(image_bgr)
 
     def near(x: float, y: float, own_radius: float) -> bool:
-        return math.hypot(x - u, y - v) <= (radius / 2.0 if radius else own_radius)
+        return finds(x, y, u, v, radius) if radius else math.hypot(x - u, y - v) <= own_radius
 
     def offset(item) -> float:
         return math.hypot(item.u - u, item.v - v)
