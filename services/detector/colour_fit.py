@@ -164,6 +164,8 @@ def fit_colour(samples: ColourSamples, config: DetectorConfig) -> ColourFit:
     """The hue and saturation range of the balls' pixels and what it and ``config``'s range admit
     of them and of the background; ValueError with a one-line reason when the pixels hold no
     single colour."""
+    if not samples.balls:
+        raise ValueError(f"no marked ball to fit (balls of radius under {MIN_RADIUS:g} px are skipped)")
     ball, other = samples.ball, samples.other
     hue = ball[:, 0].astype(np.float64)
     saturation = ball[:, 1].astype(np.float64)

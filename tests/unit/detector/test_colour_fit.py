@@ -86,6 +86,13 @@ def test_grey_balls_are_no_basis_for_a_range():
         fitted(frame(GREY_BGR))
 
 
+def test_frames_with_no_ball_large_enough_are_no_basis_for_a_range():
+    with pytest.raises(ValueError, match="no marked ball"):
+        fitted(frame(ORANGE_BGR), balls=[])
+    with pytest.raises(ValueError, match="no marked ball"):
+        fitted(frame(ORANGE_BGR), balls=[(160.0, 240.0, 3.0)])
+
+
 def test_frames_wider_than_the_work_size_are_sampled_as_the_detector_sees_them():
     image = frame(ORANGE_BGR)
     config = DetectorConfig()
