@@ -57,6 +57,20 @@ class Process:
             time.sleep(0.05)  # polling a file; the condition is the text, the deadline bounds it
         raise AssertionError(f"no {text!r} from {self.arguments} in {timeout} s:\n{self.output()}")
 
+    def wait_for_signal_handler(self, signal_number: int, timeout: float) -> None:
+        """Wait until the process catches ``signal_number`` (its handler is installed: SigCgt in
+        /proc), so that the signal tests the handler, not Python's start-up."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.popen.poll() is not None:
+                raise AssertionError(f"{self.arguments} exited {self.popen.returncode}:\n{self.output()}")
+            status = Path(f"/proc/{self.popen.pid}/status").read_text()
+            caught = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
+            if caught >> (signal_number - 1) & 1:
+                return
+            time.sleep(0.05)  # polling /proc; the condition is the mask, the deadline bounds it
+        raise AssertionError(f"{self.arguments} did not catch signal {signal_number} in {timeout} s:\n{self.output()}")
+
     def stop(self, timeout: float = 15.0) -> int:
         if self.popen.poll() is None:
             self.popen.send_signal(signal.SIGTERM)

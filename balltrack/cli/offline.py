@@ -5,7 +5,9 @@ that place was or was not found (see services/detector/explain.py). SIGINT or SI
 after the image in hand (its line printed whole), with status 0.
 
 ``balltrack fit-colour``: the colour range of balls marked on frames, as a detector parameter
-file (see services/detector/colour_fit.py).
+file (see services/detector/colour_fit.py). SIGINT or SIGTERM stops it after the image in hand
+with one line on stderr and status 1: it prints nothing, so a script that saves its output as
+a parameter file does not take an empty file for a fit.
 """
 
 import json
@@ -84,8 +86,13 @@ def command_fit_colour(args) -> int:
         images = marked_images(args.images, boxes, args.labels)
     except (ConfigError, ValueError) as error:
         return fail(str(error))
+    stop = stop_on_signals()
     samples = []
     for path, marked in images:
+        if stop.is_set():
+            print(f"balltrack fit-colour: stopped by a signal after {len(samples)} of {len(images)} "
+                  "images; nothing fitted", file=sys.stderr)
+            return 1
         try:  # (read here: cv2.imread would add a warning of its own to the one-line error)
             data = path.read_bytes()
         except OSError as error:

@@ -2,6 +2,7 @@
 
 import json
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -73,6 +74,19 @@ def test_detect_stops_on_sigterm_after_a_whole_line(tmp_path, log_dir):
     lines = detect.output().splitlines()
     assert 1 <= len(lines) < count
     assert all(len(json.loads(line)["balls"]) == 1 for line in lines)
+
+
+def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir):
+    photo = tmp_path / "b.png"
+    cv2.imwrite(str(photo), cv2.resize(draw_ball(floor_image(), 200.0, 300.0, 25.0), (160, 120)))
+    count = 20000  # (many seconds of work: SIGTERM comes long before the end)
+    fit = Process([sys.executable, "-m", "balltrack", "fit-colour", *[str(photo)] * count,
+                   "--box", "40,65,20,20"], log_dir / "fit-colour.log")
+    fit.wait_for_signal_handler(signal.SIGTERM, timeout=120)
+    assert fit.stop() == 1
+    output = fit.output()
+    assert re.fullmatch(r"balltrack fit-colour: stopped by a signal after \d+ of 20000 images; nothing fitted\n",
+                        output), output
 
 
 @pytest.mark.parametrize("arguments, reason", [
