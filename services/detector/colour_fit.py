@@ -116,23 +116,30 @@ def colour_samples(image_bgr: np.ndarray, circles: list[tuple[float, float, floa
     if config.blur_kernel > 1:
         blurred = cv2.GaussianBlur(work, (config.blur_kernel, config.blur_kernel), 0)
     hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
-    ball = np.zeros(hsv.shape[:2], np.uint8)
-    near = np.zeros(hsv.shape[:2], np.uint8)
+    work_height, work_width = hsv.shape[:2]
+    ball = np.zeros((work_height, work_width), np.uint8)
+    near = np.zeros((work_height, work_width), np.uint8)
     hues, balls = [], 0
     for u, v, radius in circles:
         if radius < MIN_RADIUS:
             continue
         balls += 1
         # (whole coordinates are pixel centres: see detector.in_input_frame)
-        centre = (int(round((u + 0.5) * scale - 0.5)), int(round((v + 0.5) * scale_y - 0.5)))
-        disc = np.zeros_like(ball)
-        cv2.circle(disc, centre, max(1, int(BALL_DISC * radius * scale)), 255, -1)
-        ball |= disc
-        cv2.circle(near, centre, int(math.ceil(OTHER_CLEARANCE * radius * scale + OTHER_MARGIN)), 255, -1)
+        centre_x, centre_y = int(round((u + 0.5) * scale - 0.5)), int(round((v + 0.5) * scale_y - 0.5))
+        cv2.circle(near, (centre_x, centre_y), int(math.ceil(OTHER_CLEARANCE * radius * scale + OTHER_MARGIN)),
+                   255, -1)
+        # The disc, drawn in the box around it: the ball's own pixels give its mean colour.
+        disc_radius = max(1, int(BALL_DISC * radius * scale))
+        top, left = max(0, centre_y - disc_radius), max(0, centre_x - disc_radius)
+        box = (slice(top, max(top, min(work_height, centre_y + disc_radius + 1))),
+               slice(left, max(left, min(work_width, centre_x + disc_radius + 1))))
+        disc = np.zeros(ball[box].shape, np.uint8)
+        cv2.circle(disc, (centre_x - left, centre_y - top), disc_radius, 255, -1)
+        ball[box] |= disc
         inside = disc > 0
-        shaping = shaping_pixels(hsv[inside], config)
+        shaping = shaping_pixels(hsv[box][inside], config)
         if np.count_nonzero(shaping) >= MIN_BALL_PIXELS:
-            hue = mean_hue(work[inside][shaping].mean(axis=0))
+            hue = mean_hue(work[box][inside][shaping].mean(axis=0))
             if hue >= 0:  # (not grey)
                 hues.append(hue)
     background = np.zeros_like(near)
