@@ -33,6 +33,30 @@ def process_environment() -> dict:
     return environment
 
 
+# How often ``wait_until`` looks again: what it polls (a file, /proc, a status) has no event to
+# wait on, and the deadline, not the interval, bounds the wait.
+POLL_INTERVAL = 0.05
+
+
+def wait_until(condition, timeout: float, what: str, *watched: "Process", every: float = POLL_INTERVAL):
+    """Poll ``condition()`` until it returns something truthy, and return that. Fails the test
+    (AssertionError naming ``what``) after ``timeout`` seconds, or as soon as one of the
+    ``watched`` processes has exited, with the end of its output."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = condition()
+        if result:
+            return result
+        for process in watched:
+            if process.popen.poll() is not None:
+                raise AssertionError(f"{process.arguments} exited {process.popen.returncode} while "
+                                     f"waiting for {what}:\n{process.output()[-4000:]}")
+        if time.monotonic() > deadline:
+            logs = "".join(f"\n--- {process.arguments}\n{process.output()[-2000:]}" for process in watched)
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}{logs}")
+        time.sleep(every)
+
+
 class Process:
     """A child process whose combined output goes to a log file and can be waited on."""
 
@@ -48,28 +72,17 @@ class Process:
         return self.log_path.read_text(errors="replace")
 
     def wait_for_output(self, text: str, timeout: float) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if text in self.output():
-                return
-            if self.popen.poll() is not None:
-                raise AssertionError(f"{self.arguments} exited {self.popen.returncode}:\n{self.output()}")
-            time.sleep(0.05)  # polling a file; the condition is the text, the deadline bounds it
-        raise AssertionError(f"no {text!r} from {self.arguments} in {timeout} s:\n{self.output()}")
+        wait_until(lambda: text in self.output(), timeout, f"{text!r} in its output", self)
 
     def wait_for_signal_handler(self, signal_number: int, timeout: float) -> None:
         """Wait until the process catches ``signal_number`` (its handler is installed: SigCgt in
         /proc), so that the signal tests the handler, not Python's start-up."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.popen.poll() is not None:
-                raise AssertionError(f"{self.arguments} exited {self.popen.returncode}:\n{self.output()}")
+        def caught() -> bool:
             status = Path(f"/proc/{self.popen.pid}/status").read_text()
-            caught = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
-            if caught >> (signal_number - 1) & 1:
-                return
-            time.sleep(0.05)  # polling /proc; the condition is the mask, the deadline bounds it
-        raise AssertionError(f"{self.arguments} did not catch signal {signal_number} in {timeout} s:\n{self.output()}")
+            mask = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
+            return bool(mask >> (signal_number - 1) & 1)
+
+        wait_until(caught, timeout, f"a handler of signal {signal_number}", self)
 
     def stop(self, timeout: float = 15.0) -> int:
         if self.popen.poll() is None:
@@ -112,34 +125,54 @@ def start_service(name: str, endpoint: str, log_dir: Path, *extra: str) -> Proce
 
 
 class Collector:
-    """Collects decoded messages of one key and waits for a condition on them."""
+    """Collects decoded messages of one key, with their arrival times (``time.monotonic()``),
+    and waits for a condition on them.
 
-    def __init__(self, session, key: str, message: str | None):
+    ``message``: the schema to decode (None: keep the raw key and payload); a payload that does
+    not decode is counted in ``rejected`` and never satisfies a condition. ``keep`` makes what is
+    kept of a decoded message, None to leave it out.
+    """
+
+    def __init__(self, session, key: str, message: str | None, keep=lambda message: message):
         self.messages: list[dict] = []
+        self.items: list[tuple[float, dict]] = []  # (arrival, message), in step with messages
         self.rejected: list[str] = []
         self._changed = threading.Condition()
-        self._message = message
 
         def on_sample(sample):
+            arrival = time.monotonic()
             payload = sample.payload.to_bytes()
-            with self._changed:
-                if self._message is None:
-                    self.messages.append({"key": str(sample.key_expr), "payload": payload})
-                else:
-                    try:
-                        self.messages.append(decode(self._message, payload))
-                    except ValueError as error:
+            if message is None:
+                kept = {"key": str(sample.key_expr), "payload": payload}
+            else:
+                try:
+                    kept = keep(decode(message, payload))
+                except ValueError as error:
+                    with self._changed:
                         self.rejected.append(str(error))
+                    return
+            if kept is None:
+                return
+            with self._changed:
+                self.messages.append(kept)
+                self.items.append((arrival, kept))
                 self._changed.notify_all()
 
         self.subscriber = session.declare_subscriber(key, on_sample)
 
     def wait_for(self, predicate, timeout: float, what: str = "condition"):
         """Wait until ``predicate(messages)`` is truthy; return its value."""
+        return self._wait(lambda: predicate(self.messages), timeout, what)
+
+    def wait_for_items(self, predicate, timeout: float, what: str = "condition"):
+        """Wait until ``predicate(items)`` is truthy, items being (arrival, message); return its value."""
+        return self._wait(lambda: predicate(self.items), timeout, what)
+
+    def _wait(self, condition, timeout: float, what: str):
         deadline = time.monotonic() + timeout
         with self._changed:
             while True:
-                result = predicate(self.messages)
+                result = condition()
                 if result:
                     return result
                 remaining = deadline - time.monotonic()
@@ -153,8 +186,18 @@ class Collector:
         self.wait_for(lambda messages: len(messages) >= count, timeout, f"{count} messages")
         return list(self.messages)
 
+    def wait_after(self, moment: float, timeout: float, what: str, count: int = 1) -> list:
+        """The first ``count`` messages that arrived after ``moment``, as (arrival, message)."""
+        def found(items):
+            new = [item for item in items if item[0] > moment]
+            return new[:count] if len(new) >= count else None
+
+        return self.wait_for_items(found, timeout, what)
+
     def close(self):
-        self.subscriber.undeclare()
+        if self.subscriber is not None:
+            self.subscriber.undeclare()
+            self.subscriber = None
 
 
 class Liveliness:
@@ -213,10 +256,8 @@ def wait_matched(publisher, timeout: float = 20) -> None:
     """Until the router has told this session of a subscriber on the publisher's key: a client
     sends a put only where it knows of one, and a service's liveliness token may reach it
     before its subscriptions do."""
-    deadline = time.monotonic() + timeout
-    while not publisher.matching_status.matching:
-        assert time.monotonic() < deadline, f"no subscriber on {publisher.key_expr} in {timeout} s"
-        time.sleep(0.02)  # polling a status; the deadline bounds it
+    wait_until(lambda: publisher.matching_status.matching, timeout,
+               f"a subscriber on {publisher.key_expr}", every=0.02)
 
 
 def client(endpoint: str):

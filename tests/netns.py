@@ -25,6 +25,8 @@ import subprocess
 import sys
 import time
 
+from tests.harness import wait_until
+
 IP_TIMEOUT = 20.0  # seconds for one `ip` command; they take milliseconds
 _availability: tuple[bool, str] | None = None
 
@@ -184,14 +186,20 @@ class NetworkNamespaces:
 
     def close(self) -> None:
         """Kill what still runs inside (only our own children can be there), then delete all."""
-        deadline = time.monotonic() + 10
-        while (leftovers := self.pids()) and time.monotonic() < deadline:
+        def all_gone() -> bool:
+            leftovers = self.pids()
             for pid in leftovers:
                 try:
                     os.kill(pid, signal.SIGKILL)
                 except ProcessLookupError:
                     pass
             self._reap(leftovers)
+            return not leftovers
+
+        try:
+            wait_until(all_gone, 10, "the processes inside the namespaces to go")
+        except AssertionError:
+            pass  # deleting the namespaces below says what is left
         errors = []
         for name in reversed(self._created):
             result = _ip("netns", "delete", name, check=False)
@@ -209,7 +217,6 @@ class NetworkNamespaces:
                 os.waitpid(pid, os.WNOHANG)
             except ChildProcessError:
                 pass
-        time.sleep(0.05)  # give the kernel a moment to tear the processes down before re-listing
 
 
 def remove_stale(prefix: str = "bt-", older_than: float = 900.0) -> list[str]:

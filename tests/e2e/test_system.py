@@ -25,7 +25,6 @@ import math
 import os
 import signal
 import statistics
-import threading
 import time
 import tomllib
 from pathlib import Path
@@ -34,12 +33,11 @@ import pytest
 import zenoh
 
 from balltrack.common.geometry import wrap_angle
-from balltrack.common.messages import decode
 from balltrack.common.referee import Referee, errors
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.rig import scenario_data, write_scenario
 from balltrack.services.simulator.control import send_command
-from tests.harness import REPO, Liveliness, Router, client, query_config
+from tests.harness import REPO, Collector, Liveliness, Router, client, query_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -74,62 +72,6 @@ def moved(before: dict, after: dict) -> float:
             + abs(wrap_angle(last["yaw"] - first["yaw"])))
 
 
-class Stream:
-    """Decoded messages of one key with their arrival times (time.monotonic()), and waits;
-    ``keep`` makes what is kept of a message, None to leave it out."""
-
-    def __init__(self, session, key: str, message: str, keep=lambda message: message):
-        self.items: list[tuple[float, dict]] = []
-        self._changed = threading.Condition()
-
-        def on_sample(sample):
-            arrival = time.monotonic()
-            try:
-                decoded = keep(decode(message, sample.payload.to_bytes()))
-            except ValueError:
-                return  # a malformed message never satisfies a condition
-            if decoded is None:
-                return
-            with self._changed:
-                self.items.append((arrival, decoded))
-                self._changed.notify_all()
-
-        self.subscriber = session.declare_subscriber(key, on_sample)
-
-    @property
-    def messages(self) -> list[dict]:
-        with self._changed:
-            return [message for _, message in self.items]
-
-    def wait_for(self, predicate, timeout: float, what: str):
-        """Wait until ``predicate(items)`` is truthy and return it; items are (arrival, message)."""
-        deadline = time.monotonic() + timeout
-        with self._changed:
-            while True:
-                result = predicate(self.items)
-                if result:
-                    return result
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    last = self.items[-1][1] if self.items else None
-                    raise AssertionError(f"timed out after {timeout} s waiting for {what}; "
-                                         f"{len(self.items)} messages, last: {last}")
-                self._changed.wait(remaining)
-
-    def wait_after(self, moment: float, timeout: float, what: str, count: int = 1) -> list:
-        """The first ``count`` messages that arrived after ``moment``, as (arrival, message)."""
-        def found(items):
-            new = [item for item in items if item[0] > moment]
-            return new[:count] if len(new) >= count else None
-
-        return self.wait_for(found, timeout, what)
-
-    def close(self) -> None:
-        if self.subscriber is not None:
-            self.subscriber.undeclare()
-            self.subscriber = None
-
-
 def header_only(message: dict) -> dict:
     return {"header": message["header"]}
 
@@ -153,7 +95,7 @@ class Pipeline:
         self.system = start_system(log_dir / "run", settings={"simulator": simulator, "follower": list(FOLLOWER)},
                                    config_dir=DEMO_CONFIG, wait=120, output=None)
         self.session = None
-        self.streams: list[Stream] = []
+        self.streams: list[Collector] = []
         try:
             self.session = client(self.system.endpoint)
             self.liveliness = Liveliness(self.session)
@@ -162,7 +104,7 @@ class Pipeline:
             self.located = self.stream("detected_ball_3d", "Ball3D")
             self.stats = self.stream("simulator/stats", "Stats")
             assert send_command(self.session, {"op": "reset", "scenario": scenario}) == {"ok": True}
-            first = self.truths.wait_for(lambda items: items, 90, f"the first frame of {scenario}")
+            first = self.truths.wait_for_items(lambda items: items, 90, f"the first frame of {scenario}")
             self.first_frame_wall = time.monotonic()
             self.origin = seconds(first[0][1])
             self.startup_seconds = self.first_frame_wall - started
@@ -170,8 +112,8 @@ class Pipeline:
             self.close()
             raise
 
-    def stream(self, key: str, message: str, keep=lambda message: message) -> Stream:
-        stream = Stream(self.session, key, message, keep)
+    def stream(self, key: str, message: str, keep=lambda message: message) -> Collector:
+        stream = Collector(self.session, key, message, keep)
         self.streams.append(stream)
         return stream
 
@@ -192,7 +134,7 @@ class Pipeline:
             judged = len(items)
             return referee.over
 
-        self.truths.wait_for(over, wall_timeout, "the robot reaching the ball")
+        self.truths.wait_for_items(over, wall_timeout, "the robot reaching the ball")
         self.run_wall_seconds = time.monotonic() - self.first_frame_wall
         return referee
 
@@ -291,14 +233,14 @@ class TestChase:
         follower = query_config(chase.session, "follower")["config"]
         simulator = query_config(chase.session, "simulator")["config"]
         images = chase.stream("camera/image_raw", "Image", header_only)
-        images.wait_for(lambda items: items, 30, "a frame")
+        images.wait_for_items(lambda items: items, 30, "a frame")
         reply = query_config(chase.session, "simulator", {"publish_images": False})
         assert reply["ok"] and reply["config"]["publish_images"] is False, reply
         switched = time.monotonic()
 
         # The follower times out (rcv_timeout_secs of simulated time after the last frame's
         # detection) and turns on the spot, the way it last saw the ball, at search speed.
-        first_search = chase.commands.wait_for(lambda items: next(
+        first_search = chase.commands.wait_for_items(lambda items: next(
             (message for arrival, message in items if arrival > switched and message["mode"] == "search"),
             None), 60, "a search command")
         last_frame = images.items[-1][1]
@@ -307,7 +249,7 @@ class TestChase:
             found = [message for _, message in items if message["time"] >= first_search["time"]]
             return found if len(found) >= 15 else None
 
-        searching = chase.commands.wait_for(search_commands, 60, "1.5 s of search commands")
+        searching = chase.commands.wait_for_items(search_commands, 60, "1.5 s of search commands")
         waited = first_search["time"] / 1e9 - seconds(last_frame)
         timeout = follower["rcv_timeout_secs"]
         report(f"frames stopped after seq {last_frame['header']['seq']} ({seconds(last_frame):.3f} s); "
@@ -338,7 +280,7 @@ class TestChase:
         last_seen = max(command["time"] for command in chase.commands.messages) / 1e9
         timeout = simulator["cmd_timeout"]
         braking = abs(direction) / simulator["max_angular_accel"]
-        chase.truths.wait_for(lambda items: seconds(items[-1][1]) > last_seen + timeout + braking + 0.5,
+        chase.truths.wait_for_items(lambda items: seconds(items[-1][1]) > last_seen + timeout + braking + 0.5,
                               120, "ground truth well past the safety stop")
         times = sorted(command["time"] for command in chase.commands.messages)
         last_command = times[-1] / 1e9
@@ -351,9 +293,9 @@ class TestChase:
             taken_times = [message["command_time"] for arrival, message in items if arrival > waited_from]
             return taken_times[-1] if len(taken_times) >= 2 and taken_times[-1] == taken_times[-2] else None
 
-        taken = chase.stats.wait_for(settled, 20, "two simulator stats alike after the safety stop")
+        taken = chase.stats.wait_for_items(settled, 20, "two simulator stats alike after the safety stop")
         window_end = taken + timeout + braking + 0.5
-        chase.truths.wait_for(lambda items: seconds(items[-1][1]) > window_end, 120,
+        chase.truths.wait_for_items(lambda items: seconds(items[-1][1]) > window_end, 120,
                               "ground truth past the safety stop of the command taken last")
         # The follower's very last command, put as it shuts down, is not always applied by the
         # simulator (seen under load: braking from the one before); the robot must hold at
@@ -423,10 +365,10 @@ class Supervised:
         self.router: Router | None = None
         self.session = client(self.launched.endpoint)
         self.liveliness = Liveliness(self.session)
-        self.truths = Stream(self.session, "sim/ground_truth", "GroundTruth")
-        self.commands = Stream(self.session, "cmd_vel", "Twist")
-        self.located = Stream(self.session, "detected_ball_3d", "Ball3D")
-        self.detected = Stream(self.session, "detected_ball", "Ball2D")
+        self.truths = Collector(self.session, "sim/ground_truth", "GroundTruth")
+        self.commands = Collector(self.session, "cmd_vel", "Twist")
+        self.located = Collector(self.session, "detected_ball_3d", "Ball3D")
+        self.detected = Collector(self.session, "detected_ball", "Ball2D")
 
     def children(self) -> dict:
         return self.launched.children()
@@ -455,7 +397,7 @@ class TestSupervised:
         # The system started with the chase; if the robot is already near the ball, start again
         # with the robot facing it 2 m away. (After such a jump the follower ignores the ball
         # for rcv_timeout_secs: it no longer looks like the target it was following.)
-        truth = system.truths.wait_for(lambda items: items, 60, "ground truth")[-1][1]
+        truth = system.truths.wait_for_items(lambda items: items, 60, "ground truth")[-1][1]
         if errors(truth)[0] < 1.5:
             assert send_command(system.session, {"op": "reset"}) == {"ok": True}
             ball = truth["balls"][0]["position"]
@@ -470,7 +412,7 @@ class TestSupervised:
             return len(recent) == 10 and all(message["mode"] == "chase" and message["header"]["seq"]
                                              > truth["header"]["seq"] for message in recent)
 
-        system.commands.wait_for(chasing, 90, "ten chase commands in a row")
+        system.commands.wait_for_items(chasing, 90, "ten chase commands in a row")
         old_pid = int((system.run_dir / "locator.pid").read_text())
         before = system.truths.items[-1][1]
         killed = time.monotonic()

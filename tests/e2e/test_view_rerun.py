@@ -21,7 +21,7 @@ websockets = pytest.importorskip("websockets")
 
 from balltrack.common.network import free_port  # noqa: E402
 from balltrack.deploy.launcher import start_system  # noqa: E402
-from tests.harness import REPO, Process  # noqa: E402
+from tests.harness import REPO, Process, wait_until  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -62,11 +62,13 @@ class Chromium:
              "--window-size=1280,800", "--remote-debugging-port=0", "about:blank"],
             stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         port_file = profile / "DevToolsActivePort"
-        deadline = time.monotonic() + 60
-        while not port_file.exists() or not port_file.read_text().strip():
-            if self.popen.poll() is not None or time.monotonic() > deadline:
-                raise AssertionError(f"chromium did not open its DevTools port: {log_path.read_text()[-2000:]}")
-            time.sleep(0.1)  # polling for the file chromium writes; bounded by the deadline
+
+        def port_written() -> bool:
+            if self.popen.poll() is not None:
+                raise AssertionError(f"chromium exited {self.popen.returncode}: {log_path.read_text()[-2000:]}")
+            return port_file.exists() and bool(port_file.read_text().strip())
+
+        wait_until(port_written, 60, "chromium's DevTools port (its file)")
         port = int(port_file.read_text().split()[0])
         pages = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10))
         self.page = next(page["webSocketDebuggerUrl"] for page in pages if page["type"] == "page")

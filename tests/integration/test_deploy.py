@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from balltrack.common.messages import encode, header
-from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment
+from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment, wait_until
 
 SERVICES = ["detector", "locator", "follower"]
 
@@ -35,17 +35,6 @@ def read_status(run_dir: Path) -> dict:
         return json.loads((run_dir / "status.json").read_text())
     except (OSError, ValueError):
         return {}
-
-
-def wait_for(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while True:
-        result = predicate()
-        if result:
-            return result
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)  # polling a file the supervisor rewrites; the deadline bounds it
 
 
 def pid_running(pid: int) -> bool:
@@ -93,7 +82,7 @@ def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
         old_pid = int((run_dir / "locator.pid").read_text())
         os.kill(old_pid, signal.SIGKILL)
         liveliness.wait("locator", alive=False, timeout=15)
-        child = wait_for(lambda: (lambda c: c if c.get("restarts") == 1 and c.get("state") == "running"
+        child = wait_until(lambda: (lambda c: c if c.get("restarts") == 1 and c.get("state") == "running"
                                   and c.get("pid") not in (None, old_pid) else None)(
             read_status(run_dir).get("children", {}).get("locator", {})), 30, "the locator's restart")
         assert child["last_exit"] == -signal.SIGKILL

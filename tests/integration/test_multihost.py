@@ -15,11 +15,10 @@ import json
 import math
 import re
 import sys
-import time
 
 import pytest
 
-from tests.harness import REPO, Process, fully_in_view
+from tests.harness import REPO, Process, fully_in_view, wait_until
 from tests.netns import NetworkNamespaces, netns_available, remove_stale
 
 pytestmark = pytest.mark.netns
@@ -78,24 +77,6 @@ def json_lines(process: Process) -> list[dict]:
             except (ValueError, KeyError):
                 pass  # a line still being written
     return messages
-
-
-def wait_until(condition, timeout: float, what: str, *watched: Process):
-    """Poll ``condition()`` (it reads log files) until truthy; fail early if a process died."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = condition()
-        if result:
-            return result
-        for process in watched:
-            if process.popen.poll() is not None:
-                raise AssertionError(f"{process.arguments} exited {process.popen.returncode} while "
-                                     f"waiting for {what}:\n{process.output()[-4000:]}")
-        if time.monotonic() > deadline:
-            logs = "\n\n".join(f"--- {process.arguments[3:]}\n{process.output()[-2000:]}"
-                               for process in watched)
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}\n{logs}")
-        time.sleep(0.1)  # the condition is read from log files; the deadline bounds the wait
 
 
 def at_least(count: int, collect):

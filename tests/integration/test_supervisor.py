@@ -3,9 +3,9 @@
 import json
 import sys
 import threading
-import time
 
 from balltrack.deploy.supervisor import ChildSpec, Supervisor, SupervisorSettings
+from tests.harness import wait_until
 
 FAST = SupervisorSettings(backoff_initial=0.05, backoff_max=0.2, stable_after=5.0, give_up_after=3,
                           stop_timeout=2.0)
@@ -27,13 +27,6 @@ def status(run_dir) -> dict:
         return json.loads((run_dir / "status.json").read_text())
     except (OSError, ValueError):
         return {}
-
-
-def wait_for(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.02)  # polling the status file; the deadline bounds it
 
 
 def test_exit_0_is_left_alone_crashes_are_retried_then_given_up(tmp_path):
@@ -64,7 +57,7 @@ def test_stop_terminates_and_kills_what_ignores_sigterm(tmp_path):
     thread, result = run_in_thread(supervisor)
     for name in ("polite", "stubborn"):
         # A line of its own: the log's header line holds the command, 'ready' included.
-        wait_for(lambda: "ready" in (tmp_path / f"{name}.log").read_text().splitlines()
+        wait_until(lambda: "ready" in (tmp_path / f"{name}.log").read_text().splitlines()
                  if (tmp_path / f"{name}.log").exists() else False, 20, f"{name} to start")
     assert (tmp_path / "stubborn.pid").exists() and (tmp_path / "supervisor.pid").exists()
     supervisor.stop.set()
