@@ -6,6 +6,7 @@ module of this package:
 1-4. ``mask.py``: brightness normalisation of dark frames, blur, HSV and CLAHE, the colour
    mask (HSV ranges and a chroma floor) and its morphological clean-up; extremely dark frames
    are classified on wider averages.
+5-6 run per mask blob in ``candidates.py``.
 5. ``proposals.py``: candidates per mask blob, its enclosing circle and, unless that is already
    a clean isolated ball, Hough circles inside the blob's box and (``arcs.py``) the circles
    of the long round pieces of its outline between concave points or across its waist (a
@@ -54,26 +55,17 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from balltrack.services.detector.arcs import arc_proposals
-from balltrack.services.detector.checks import (CandidateMetrics, colour_stats, judge,
-                                                measure_mask)
-from balltrack.services.detector.clusters import CLUSTER_MIN_SIZE, CLUSTER_SPREAD, Measured, cluster_candidates
+from balltrack.services.detector.candidates import contour_candidates
+from balltrack.services.detector.checks import CandidateMetrics, judge, measure_mask
+from balltrack.services.detector.clusters import Measured
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
-from balltrack.services.detector.fit import refine_on_boundary
-from balltrack.services.detector.front import front_balls, may_overlap
+from balltrack.services.detector.front import may_overlap
 from balltrack.services.detector.geometry import Candidate, circle_overlap
-from balltrack.services.detector.highlight import crescent_candidates, highlight_metrics, needs_highlight
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
-from balltrack.services.detector.occlusion import measured_in_view
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
-from balltrack.services.detector.proposals import (FrameSearch, blob_image, blob_proposals, fill_holes,
-                                                   frame_search, hough_proposals, leftover_blobs,
-                                                   leftover_search)
+from balltrack.services.detector.proposals import FrameSearch, fill_holes, frame_search, leftover_blobs, leftover_search
 
-# A candidate's colour may be a lit cap down to this share of min_radius (a ball under a light
-# with no ambient: its dark side is found by the outline search, or it is dropped).
-LIT_CAP_SHARE = 0.6
 # Rounds of accepting balls and looking again around them.
 MAX_ROUNDS = 3
 # A ball holds no other ball: a circle mostly (half its area) inside a passing one of at least
@@ -204,79 +196,9 @@ class BallDetector:
         search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
-            measured.extend(self._contour_candidates(contour, search, shape_mask))
+            measured.extend(contour_candidates(contour, search, shape_mask, self.config))
         self._lap("blobs", started)
         return self._accept(measured, search)
-
-    def _contour_candidates(self, contour: np.ndarray, search: FrameSearch,
-                            mask: np.ndarray) -> list[Measured]:
-        """Every candidate of one blob of ``mask``, measured on it: its enclosing circle and,
-        unless that is a clean isolated ball, Hough's circles, its outline arcs' circles and
-        the members of the cluster of balls it may be."""
-        found = self._blob_candidates(contour, search, mask)
-        if found is None:
-            return []
-        if any(metrics.clean for _, metrics in found):
-            return found  # one isolated round blob: nothing for Hough to split
-        proposals = hough_proposals(cv2.boundingRect(contour), search, self.config)
-        in_blob = self._measure_proposals(proposals, search, mask)
-        in_blob.extend(crescent_candidates(contour, mask, search.planes, search.small_radius,
-                                           search.max_radius, self.config))
-        blob, left, top = blob_image(contour, mask)
-        arcs = arc_proposals(blob, left, top, CLUSTER_MIN_SIZE * search.small_radius, search.max_radius)
-        in_blob.extend(self._arc_candidates(arcs, search, mask))
-        return (found + in_blob + cluster_candidates(contour, search, mask, found + in_blob, arcs)
-                + front_balls(contour, search, mask, CLUSTER_MIN_SIZE * search.small_radius))
-
-    def _blob_candidates(self, contour: np.ndarray, search: FrameSearch,
-                         mask: np.ndarray) -> list[Measured] | None:
-        """The blob's enclosing circle, refined and measured on ``mask``; None when the blob
-        cannot be or hold a ball."""
-        proposals = blob_proposals(contour, search, mask, self.config)
-        if proposals is None:
-            return None
-        return self._measure_proposals(proposals, search, mask)
-
-    def _arc_candidates(self, arcs: list[Candidate], search: FrameSearch,
-                        mask: np.ndarray) -> list[Measured]:
-        """The circles of a blob's long even outline arcs (see arcs.py), refined and measured
-        on ``mask``: those as large as a cluster member and evenly edged all round
-        (CLUSTER_MIN_SIZE, CLUSTER_SPREAD): a piece of outline alone proves less than a whole
-        blob, and a lobe of ragged clutter is round along one arc only."""
-        return [(candidate, metrics) for candidate, metrics in self._measure_proposals(arcs, search, mask)
-                if metrics.size >= CLUSTER_MIN_SIZE and metrics.mask.spread <= CLUSTER_SPREAD]
-
-    def _measure_proposals(self, proposals: list[Candidate], search: FrameSearch,
-                           mask: np.ndarray) -> list[Measured]:
-        """Refine each proposal on the mask boundary, then measure it on ``mask``."""
-        results: list[Measured] = []
-        fitted_circles: list[Candidate] = []
-        for proposal in proposals:
-            candidate = refine_on_boundary(proposal, search.boundary_x, search.boundary_y)
-            if candidate is None:
-                continue
-            # (the colour of a ball with a dark side, no ambient light, may be a smaller cap)
-            if not (LIT_CAP_SHARE * search.min_radius <= candidate.radius <= search.max_radius):
-                continue
-            if any(math.hypot(candidate.x - other.x, candidate.y - other.y) < 0.1 * other.radius + 0.5
-                   and abs(candidate.radius - other.radius) < 0.1 * other.radius + 0.5
-                   for other in fitted_circles):
-                continue  # converged onto a circle already measured
-            fitted_circles.append(candidate)
-            on_mask = measure_mask(candidate, mask)
-            if on_mask is None:
-                continue
-            metrics = CandidateMetrics(mask=on_mask, colour=colour_stats(candidate, search.planes),
-                                       size=candidate.radius / search.small_radius)
-            if needs_highlight(metrics, self.config) and judge(metrics, self.config) is None:
-                joined = highlight_metrics(candidate, mask, search.planes, self.config)
-                if joined is not None:
-                    highlighted = dataclasses.replace(metrics, mask=joined, highlighted=True)
-                    if judge(highlighted, self.config) is not None:
-                        metrics = highlighted
-            metrics = measured_in_view(candidate, metrics, mask, self.config)
-            results.append((candidate, metrics))
-        return results
 
     def _accept(self, measured: list[Measured], search: FrameSearch) -> list[Candidate]:
         """Accept candidates best first, then look again around each accepted ball.
@@ -382,7 +304,7 @@ class BallDetector:
         if blobs:
             search = leftover_search(search, explained)
         for contour in blobs:
-            found = self._contour_candidates(contour, search, explained)
+            found = contour_candidates(contour, search, explained, self.config)
             for candidate, metrics in found:
                 candidate.score = judge(metrics, self.config) or 0.0
             results.extend(found)
