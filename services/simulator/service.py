@@ -40,7 +40,8 @@ from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate
 from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
-from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Recorder, Simulation
+from balltrack.services.simulator.output_files import OutputFiles
+from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Simulation
 
 LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
                  "encoding", "jpeg_quality", "publish_images"}
@@ -63,7 +64,7 @@ def scenario_folder(configured: str):
 
 
 def build(service: ServiceContext):
-    recorder = Recorder.from_config(service.config)
+    output_files = OutputFiles.from_config(service.config)
     simulation = Simulation(service.config)
     simulation.render_view("front")  # the first render compiles shaders: not in frame 1's time
     # Lockstep must not lose a frame (it would wait for an answer that cannot come).
@@ -163,14 +164,14 @@ def build(service: ServiceContext):
             now = simulation.step_frame(time.time())
             head = header(simulation.stamp_ns, simulation.frame_index)
             rgb = None
-            if config.publish_images or recorder is not None:
+            if config.publish_images or output_files is not None:
                 started = time.perf_counter()
                 rgb = simulation.render()
                 render_seconds.append(time.perf_counter() - started)
                 timing["render_ms"] = 1000 * sum(render_seconds) / len(render_seconds)  # last 100
             truth = simulation.ground_truth()
-            if recorder is not None:
-                recorder.write(simulation, rgb, truth)
+            if output_files is not None:
+                output_files.write(simulation, rgb, truth)
         # The frame's message is made before the wait for its delivery time, as a camera
         # converts its frame before it delivers it: none of it is on the frame's way.
         image = image_message(rgb, head, config) if config.publish_images else None
@@ -219,8 +220,8 @@ def build(service: ServiceContext):
             tokens.undeclare()
             with frame_lock:
                 simulation.close()
-            if recorder is not None:
-                recorder.close()
+            if output_files is not None:
+                output_files.close()
 
     return loop
 

@@ -30,11 +30,9 @@ Conventions:
 """
 
 import functools
-import json
 import math
 import os
 import threading
-from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -42,7 +40,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 import numpy as np  # noqa: E402
 
-from balltrack.common.config import ConfigError  # noqa: E402
 from balltrack.common.geometry import wrap_angle  # noqa: E402
 from balltrack.common.memory import release_freed_memory  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
@@ -525,100 +522,3 @@ class Simulation:
         self._linear = 0.0
         self._angular = 0.0
         mujoco.mj_forward(self._model, self._data)
-
-
-class Recorder:
-    """Writes rendered frames to a video file and ground truth to a JSON-lines file (optional)."""
-
-    def __init__(self, video_path: str, ground_truth_path: str, rate_hz: float,
-                 width: int, height: int):
-        import cv2  # only needed when recording
-
-        self._cv2 = cv2
-        self._video = None
-        self._log = None
-        if video_path:
-            fourcc = "MJPG" if video_path.lower().endswith(".avi") else "mp4v"
-            Path(video_path).parent.mkdir(parents=True, exist_ok=True)
-            self._video = cv2.VideoWriter(video_path, cv2.VideoWriter_fourcc(*fourcc),
-                                          rate_hz, (width, height))
-            if not self._video.isOpened():
-                raise ConfigError(f"video_path: cannot write a video to {video_path}")
-        if ground_truth_path:
-            Path(ground_truth_path).parent.mkdir(parents=True, exist_ok=True)
-            self._log = open(ground_truth_path, "w", encoding="utf-8")
-
-    @classmethod
-    def from_config(cls, config: SimulatorConfig) -> "Recorder | None":
-        """A Recorder for config's video_path / ground_truth_path, or None if both are empty."""
-        if not config.video_path and not config.ground_truth_path:
-            return None
-        return cls(config.video_path, config.ground_truth_path, config.rate_hz,
-                   config.width, config.height)
-
-    def write(self, simulation: Simulation, image_rgb: np.ndarray | None = None,
-              ground_truth: dict[str, Any] | None = None) -> None:
-        """Record the current frame (``image_rgb``) and ground truth of ``simulation``."""
-        if self._video is not None and image_rgb is not None:
-            self._video.write(self._cv2.cvtColor(image_rgb, self._cv2.COLOR_RGB2BGR))
-        if self._log is not None:
-            truth = ground_truth if ground_truth is not None else simulation.ground_truth()
-            linear, angular = simulation.robot_velocity()
-            record = {"stamp": simulation.stamp_ns, "seq": simulation.frame_index,
-                      "time": simulation.time, "wall_time": simulation.wall_time,
-                      "linear": linear, "angular": angular, **truth}
-            self._log.write(json.dumps(record) + "\n")
-
-    def close(self) -> None:
-        if self._video is not None:
-            self._video.release()
-            self._video = None
-        if self._log is not None:
-            self._log.close()
-            self._log = None
-
-
-def benchmark(config: SimulatorConfig, frames: int = 150) -> dict[str, float]:
-    """Time the frame loop without pacing: render-only ms/frame, step-only ms, fast-mode fps."""
-    import time
-
-    simulation = Simulation(config)
-    try:
-        simulation.render()  # warm-up: first render compiles shaders / uploads textures
-        started = time.perf_counter()
-        for _ in range(frames):
-            simulation.render()
-        render_ms = (time.perf_counter() - started) / frames * 1000
-        started = time.perf_counter()
-        for frame in range(frames):
-            simulation.set_command(0.3, 0.5 * math.sin(frame / 10), simulation.time)
-            simulation.step_frame()
-        step_ms = (time.perf_counter() - started) / frames * 1000
-        started = time.perf_counter()
-        for frame in range(frames):
-            simulation.set_command(0.3, 0.5 * math.sin(frame / 10), simulation.time)
-            simulation.step_frame()
-            simulation.render()
-            simulation.ground_truth()
-        loop_seconds = time.perf_counter() - started
-    finally:
-        simulation.close()
-    return {"render_ms": render_ms, "step_ms": step_ms, "fast_fps": frames / loop_seconds}
-
-
-if __name__ == "__main__":
-    import argparse
-
-    from balltrack.common.config import load_config
-
-    parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
-                                                 "python -m balltrack.services.simulator.sim --frames 150")
-    parser.add_argument("--frames", type=int, default=150)
-    parser.add_argument("--config", default=None)
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    arguments = parser.parse_args()
-    settings = load_config(SimulatorConfig, arguments.config, arguments.set, section="simulator")
-    results = benchmark(settings, arguments.frames)
-    print(f"{settings.width}x{settings.height} shadows={settings.shadows}: "
-          f"render {results['render_ms']:.1f} ms/frame, step {results['step_ms']:.2f} ms/frame, "
-          f"fast mode (step + render + ground truth) {results['fast_fps']:.1f} frames/s")

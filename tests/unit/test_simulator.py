@@ -526,12 +526,12 @@ def test_frame_loop_in_another_thread_with_commands_from_this_one():
 def test_recorder_writes_video_and_ground_truth(tmp_path):
     import json
 
-    from balltrack.services.simulator.sim import Recorder
+    from balltrack.services.simulator.output_files import OutputFiles
 
     config = SimulatorConfig(width=160, height=120, video_path=str(tmp_path / "run.avi"),
                              ground_truth_path=str(tmp_path / "truth.jsonl"))
     simulation = Simulation(config)
-    recorder = Recorder.from_config(config)
+    recorder = OutputFiles.from_config(config)
     try:
         for _ in range(5):
             simulation.set_command(0.2, 0.0)
@@ -545,4 +545,16 @@ def test_recorder_writes_video_and_ground_truth(tmp_path):
     assert lines[-1]["stamp"] == round(5 / 30 * 1e9)
     assert lines[-1]["wall_time"] == 123.0 and lines[-1]["balls"][0]["id"] == "tennis"
     assert (tmp_path / "run.avi").stat().st_size > 1000
-    assert Recorder.from_config(SimulatorConfig()) is None
+    assert OutputFiles.from_config(SimulatorConfig()) is None
+
+
+@pytest.mark.parametrize("arguments, reason", [(["--frames", "0"], "--frames: must be at least 1"),
+                                               (["--set", "nonsense=1"], "nonsense: unknown parameter")])
+def test_benchmark_rejects_bad_arguments_with_one_line(arguments, reason, capsys):
+    from balltrack.services.simulator.benchmark import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(arguments)
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert reason in error.strip().splitlines()[-1] and "Traceback" not in error
