@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 import zenoh
 
+from balltrack.common.arguments import integer, number
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.command import Command
@@ -166,13 +167,10 @@ def record_and_play(endpoint: str, folder: Path, frames: int, small: int, sessio
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seconds", type=float, default=20.0, help="camera measurement window")
-    parser.add_argument("--frames", type=int, default=300, help="640x480 bgr8 frames recorded and played")
-    parser.add_argument("--small", type=int, default=20000, help="Ball3D messages recorded and played")
+    parser.add_argument("--seconds", type=number(above=0), default=20.0, help="camera measurement window")
+    parser.add_argument("--frames", type=integer(minimum=1), default=300, help="640x480 bgr8 frames recorded and played")
+    parser.add_argument("--small", type=integer(minimum=1), default=20000, help="Ball3D messages recorded and played")
     args = parser.parse_args(argv)
-    for option in ("seconds", "frames", "small"):
-        if getattr(args, option) <= 0:
-            parser.error(f"--{option}: must be > 0")
     with tempfile.TemporaryDirectory(prefix="balltrack-io-") as folder, \
             start_system(Path(folder) / "run", services=(), output=io.StringIO()) as system:
         session = open_session([system.endpoint], open_timeout=10)

@@ -24,10 +24,13 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from balltrack.common.arguments import integer  # noqa: E402
+from balltrack.common.config import ConfigError, load_config  # noqa: E402
 from balltrack.common.messages import decode  # noqa: E402
 from balltrack.common.session import open_session  # noqa: E402
-from balltrack.deploy.launcher import SERVICES, start_system  # noqa: E402
+from balltrack.deploy.launcher import SERVICES, LaunchError, start_system  # noqa: E402
 from balltrack.experiments.processes import cpu_seconds  # noqa: E402
+from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
 
 WARM_UP_STATS = 3  # stats messages (seconds) left out of the averages: start-up costs
 
@@ -53,11 +56,14 @@ class StatsStream:
             return list(self.messages)
 
 
+def simulator_settings(arguments) -> list[str]:
+    return [f"width={arguments.width}", f"height={arguments.height}", f"rate_hz={arguments.rate}",
+            f"pacing={arguments.pacing}", *arguments.set]
+
+
 def run(arguments, log_dir: Path) -> int:
     services = ("simulator",) if arguments.alone else SERVICES
-    simulator = [f"width={arguments.width}", f"height={arguments.height}", f"rate_hz={arguments.rate}",
-                 f"pacing={arguments.pacing}", *arguments.set]
-    settings = {"simulator": simulator} | ({} if arguments.alone else {"follower": ["use_sim_time=true"]})
+    settings = {"simulator": simulator_settings(arguments)} | ({} if arguments.alone else {"follower": ["use_sim_time=true"]})
     system = start_system(log_dir, services, settings, wait=60, output=None)
     session = None
     try:
@@ -99,7 +105,7 @@ def run(arguments, log_dir: Path) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.realtime_check", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seconds", type=int, default=20, help="measured wall seconds (default 20)")
+    parser.add_argument("--seconds", type=integer(minimum=1), default=20, help="measured wall seconds (default 20)")
     parser.add_argument("--width", type=int, default=640)
     parser.add_argument("--height", type=int, default=480)
     parser.add_argument("--rate", type=float, default=30.0, help="camera frames per simulated second")
@@ -109,11 +115,19 @@ def main(argv: list[str] | None = None) -> int:
                         help="another simulator setting, repeatable")
     parser.add_argument("--log-dir", help="keep the run folder (processes' logs) here (default: a temporary one)")
     arguments = parser.parse_args(argv)
-    if arguments.log_dir:
-        Path(arguments.log_dir).mkdir(parents=True, exist_ok=True)
-        return run(arguments, Path(arguments.log_dir))
-    with tempfile.TemporaryDirectory(prefix="realtime_check-") as log_dir:
-        return run(arguments, Path(log_dir))
+    try:  # (the simulator would refuse them too, but only after the router and services started)
+        load_config(SimulatorConfig, None, simulator_settings(arguments), section="simulator")
+    except ConfigError as error:
+        parser.error(str(error))
+    try:
+        if arguments.log_dir:
+            Path(arguments.log_dir).mkdir(parents=True, exist_ok=True)
+            return run(arguments, Path(arguments.log_dir))
+        with tempfile.TemporaryDirectory(prefix="realtime_check-") as log_dir:
+            return run(arguments, Path(log_dir))
+    except (LaunchError, OSError) as error:
+        print(f"realtime_check: {str(error).splitlines()[0]}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

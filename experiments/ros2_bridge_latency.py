@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 
+from balltrack.common.arguments import integer, number
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import start_system
@@ -95,8 +96,8 @@ def stream(sessions, publish_key: str, receive_key: str, payloads: list[bytes], 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--count", type=int, default=300, help="messages per stream")
-    parser.add_argument("--rate", type=float, default=30.0, help="messages per second")
+    parser.add_argument("--count", type=integer(minimum=1), default=300, help="messages per stream")
+    parser.add_argument("--rate", type=number(above=0), default=30.0, help="messages per second")
     args = parser.parse_args(argv)
 
     pixels = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from balltrack.common import keys
+from balltrack.common.arguments import number
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.network import free_port
 from balltrack.common.session import open_session
@@ -147,10 +148,8 @@ def _summary(command: Command) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seconds", type=float, default=30.0, help="measurement window per phase")
+    parser.add_argument("--seconds", type=number(above=0), default=30.0, help="measurement window per phase")
     args = parser.parse_args(argv)
-    if args.seconds <= 0:
-        parser.error("--seconds: must be > 0")
     rows = []
     settings = {"simulator": [f"scenario={SCENARIO}", "pacing=realtime"]}
     with tempfile.TemporaryDirectory(prefix="balltrack-viewer-cost-") as folder, \

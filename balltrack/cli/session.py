@@ -2,6 +2,7 @@
 
 import sys
 
+from balltrack.common.arguments import number
 from balltrack.common.session import SessionOpenError, add_session_arguments, close_session, open_from_args
 
 
@@ -9,7 +10,7 @@ def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0
     """A subcommand with the session options and ``--timeout``."""
     sub = commands.add_parser(name, help=help_text, description=help_text)
     add_session_arguments(sub, config_file=False)
-    sub.add_argument("--timeout", type=float, default=timeout,
+    sub.add_argument("--timeout", type=number(minimum=0), default=timeout,
                      help=f"seconds to wait for a router and for answers (default {timeout:g})")
     sub.set_defaults(handler=handler)
     return sub

@@ -11,6 +11,7 @@ import math
 import sys
 import time
 
+from balltrack.common.arguments import integer
 from balltrack.common.config import ConfigError, load_config
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.sim import Simulation
@@ -45,12 +46,10 @@ def benchmark(config: SimulatorConfig, frames: int = 150) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
                                                  "python -m balltrack.services.simulator.benchmark --frames 150")
-    parser.add_argument("--frames", type=int, default=150, help="frames per measurement (default 150)")
+    parser.add_argument("--frames", type=integer(minimum=1), default=150, help="frames per measurement (default 150)")
     parser.add_argument("--config", default=None, help="a parameter file with a [simulator] section")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a parameter, repeatable")
     arguments = parser.parse_args(argv)
-    if arguments.frames < 1:
-        parser.error(f"--frames: must be at least 1, got {arguments.frames}")
     try:
         settings = load_config(SimulatorConfig, arguments.config, arguments.set, section="simulator")
     except ConfigError as error:

@@ -1,0 +1,37 @@
+"""common.arguments: the argparse types that refuse bad numbers before a command starts."""
+
+import argparse
+
+import pytest
+
+from balltrack.common.arguments import integer, number
+
+
+@pytest.mark.parametrize("text, reason", [("nan", "finite"), ("inf", "finite"), ("-1", "at least 0"),
+                                          ("x", "expected a number")])
+def test_number_refuses(text, reason):
+    with pytest.raises(argparse.ArgumentTypeError, match=reason):
+        number(minimum=0)(text)
+
+
+def test_number_above_excludes_the_bound_and_minimum_includes_it():
+    with pytest.raises(argparse.ArgumentTypeError, match="greater than 0"):
+        number(above=0)("0")
+    assert number(above=0)("0.5") == 0.5
+    assert number(minimum=0)("0") == 0.0
+
+
+@pytest.mark.parametrize("text, reason", [("0", "at least 1"), ("1.5", "whole number"), ("nan", "whole number")])
+def test_integer_refuses(text, reason):
+    with pytest.raises(argparse.ArgumentTypeError, match=reason):
+        integer(minimum=1)(text)
+
+
+def test_a_parser_gives_one_line_and_status_2(capsys):
+    parser = argparse.ArgumentParser(prog="tool")
+    parser.add_argument("--frames", type=integer(minimum=1))
+    assert parser.parse_args(["--frames", "3"]).frames == 3
+    with pytest.raises(SystemExit) as exit_info:
+        parser.parse_args(["--frames", "0"])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "tool: error: argument --frames: must be at least 1, got 0"
