@@ -25,6 +25,7 @@ import sys
 import time
 from pathlib import Path
 
+from balltrack.common.arguments import number
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys
 from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, close_session,
                                       default_endpoints, load_config_file, secure_client_path,
@@ -398,14 +399,14 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     start.add_argument("--set", action="append", default=[], dest="overrides",
                        metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
     start.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
-    start.add_argument("--wait", type=float, default=60.0, metavar="SECONDS",
+    start.add_argument("--wait", type=number(above=0), default=60.0, metavar="SECONDS",
                        help="wait this long for the services' liveliness (0: do not wait)")
     start.add_argument("--foreground", action="store_true",
                        help="run the supervisor in this process (Ctrl-C stops everything)")
     start.set_defaults(handler=command_start)
 
     stop = with_run_dir(commands.add_parser("stop", help="stop the supervisor and its children"))
-    stop.add_argument("--timeout", type=float, default=40.0)
+    stop.add_argument("--timeout", type=number(minimum=0), default=40.0)
     stop.set_defaults(handler=command_stop)
 
     supervise_command = with_run_dir(commands.add_parser(

@@ -39,6 +39,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from balltrack.common.arguments import number
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
@@ -532,7 +533,7 @@ def print_summary(result: dict) -> None:
 def build_parser() -> ArgumentParser:
     parser = ArgumentParser(prog="python -m balltrack.deploy.demo", description=__doc__,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--time-limit", type=float, default=60.0, metavar="SECONDS",
+    parser.add_argument("--time-limit", type=number(above=0), default=60.0, metavar="SECONDS",
                         help="give up after this many wall seconds of chase (default 60)")
     parser.add_argument("--run-dir", metavar="DIR", help="default runs/demo-YYYYmmdd-HHMMSS")
     parser.add_argument("--port", type=int, default=7447,
@@ -542,13 +543,13 @@ def build_parser() -> ArgumentParser:
                         help="parameter files <service>.toml (default deploy/config/demo)")
     parser.add_argument("--set", action="append", default=[], dest="overrides",
                         metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
-    parser.add_argument("--reach-distance", type=float, default=REACH_DISTANCE, metavar="M",
+    parser.add_argument("--reach-distance", type=number(above=0), default=REACH_DISTANCE, metavar="M",
                         help=f"robot centre to ball centre (default {REACH_DISTANCE})")
-    parser.add_argument("--reach-heading", type=float, default=REACH_HEADING_DEGREES, metavar="DEG",
+    parser.add_argument("--reach-heading", type=number(above=0), default=REACH_HEADING_DEGREES, metavar="DEG",
                         help=f"facing the ball within (default {REACH_HEADING_DEGREES:g})")
-    parser.add_argument("--hold", type=float, default=HOLD_SECONDS, metavar="SECONDS",
+    parser.add_argument("--hold", type=number(minimum=0), default=HOLD_SECONDS, metavar="SECONDS",
                         help=f"simulated seconds the reach must hold (default {HOLD_SECONDS:g})")
-    parser.add_argument("--start-timeout", type=float, default=90.0, metavar="SECONDS",
+    parser.add_argument("--start-timeout", type=number(above=0), default=90.0, metavar="SECONDS",
                         help="how long the services may take to come up (default 90)")
     parser.add_argument("--no-video", action="store_true", help="no video.mp4 (saves CPU)")
     parser.add_argument("--secure", metavar="DIR", help="a secure profile (balltrack secure init): TLS, "

@@ -66,3 +66,15 @@ def test_with_our_router_each_service_is_alive_before_the_next_starts():
     assert [spec.wait_alive for spec in specs] == [False, True, True, True, False]
     specs, _ = specs_for("--services", "detector,locator", "--connect", "tcp/10.0.0.2:7447")
     assert not any(spec.wait_alive for spec in specs)  # a remote router may not be up yet
+
+
+@pytest.mark.parametrize("arguments, reason", [(["--time-limit", "nan"], "--time-limit: must be a finite number"),
+                                               (["--time-limit", "-1"], "--time-limit: must be greater than 0"),
+                                               (["--hold", "-5"], "--hold: must be at least 0")])
+def test_demo_refuses_bad_numbers_before_starting_anything(arguments, reason, capsys):
+    from balltrack.deploy.demo import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(arguments)
+    assert exit_info.value.code == 2
+    assert reason in capsys.readouterr().err.strip().splitlines()[-1]
