@@ -60,6 +60,7 @@ moves tens of pixels and its size changes by percents.
 """
 
 import math
+import sys
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -76,8 +77,10 @@ _UNDISTORT_CRITERIA = (3, 100, 1e-10)  # cv2.TERM_CRITERIA_COUNT | EPS, without 
 CIRCLE_MODELS = ("mean", "area", "enclosing")
 DEFAULT_CIRCLE_MODEL = "mean"
 
-# Bisection on alpha in (0, pi/2): 64 halvings reach the resolution of a double.
+# The search for alpha in (0, pi/2): at most this many steps (64 halvings reach the resolution
+# of a double), and it stops once a step moves alpha by less than this share of it.
 _BISECTION_STEPS = 64
+_ALPHA_RESOLUTION = 4.0 * sys.float_info.epsilon
 _NEWTON_STEPS = 20
 _NEWTON_TOLERANCE_PX = 1e-10
 
@@ -390,17 +393,29 @@ def _cone_angles(centre_offset: float, radius: float, circle_model: str) -> tupl
         semi_minor = sin_alpha / math.sqrt(k)
         return phi, circle_radius(semi_major, semi_minor, circle_model)
 
-    # The reported radius grows monotonically from 0 (alpha -> 0) to infinity (alpha -> pi/2).
+    # The reported radius grows monotonically from 0 (alpha -> 0) to infinity (alpha -> pi/2):
+    # Newton's method from the enclosing model's alpha, kept inside the bracket that each
+    # evaluation narrows (a bisection step whenever Newton's would leave it). It converges
+    # in a handful of evaluations where a bisection needs ~60 (0.2 ms a ball in the locator).
     low, high = 0.0, 0.5 * math.pi
+    alpha = 0.5 * (math.atan(centre_offset + radius) - math.atan(centre_offset - radius))
     for _ in range(_BISECTION_STEPS):
-        middle = 0.5 * (low + high)
-        if middle <= low or middle >= high:
-            break
-        if cone_for(middle)[1] < radius:
-            low = middle
+        reported = cone_for(alpha)[1]
+        if reported < radius:
+            low = alpha
         else:
-            high = middle
-    alpha = 0.5 * (low + high)
+            high = alpha
+        if reported == radius or high - low <= _ALPHA_RESOLUTION * high:
+            break
+        step = _ALPHA_RESOLUTION ** 0.5 * alpha
+        slope = (cone_for(alpha + step)[1] - reported) / step
+        guess = alpha - (reported - radius) / slope if slope > 0.0 and math.isfinite(slope) else math.nan
+        if not low < guess < high:
+            guess = 0.5 * (low + high)
+        if abs(guess - alpha) <= _ALPHA_RESOLUTION * alpha:
+            alpha = guess
+            break
+        alpha = guess
     return cone_for(alpha)[0], alpha
 
 
