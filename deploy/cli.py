@@ -22,7 +22,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from balltrack.common.arguments import number
@@ -31,6 +30,7 @@ from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenE
                                       default_endpoints, load_config_file, secure_client_path,
                                       secure_router_path)
 from balltrack.common.status import service_status
+from balltrack.common.waiting import poll_until
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
                                          die_with_parent, open_for, pid_alive, save_launch, supervise,
                                          wait_alive)
@@ -265,16 +265,16 @@ def launch(run_dir: Path, specs: list[ChildSpec], info: dict, wait: float = 60.0
                        for name in [spec.name for spec in specs] if (run_dir / f"{name}.log").exists())
         raise LaunchError(f"{reason}\n--- supervisor.log (end) ---\n{tail(run_dir / 'supervisor.log')}{logs}")
 
-    deadline = time.monotonic() + max(wait, 30.0)
-    while True:  # the supervisor writes status.json as it starts each child
-        status = read_status(run_dir) or {}
-        if status.get("supervisor", {}).get("state") == "running":
-            break
+    def supervisor_running() -> bool:
+        # (the supervisor rewrites status.json as it starts each child)
+        if (read_status(run_dir) or {}).get("supervisor", {}).get("state") == "running":
+            return True
         if popen.poll() is not None:
             give_up(f"the supervisor exited ({describe_exit(popen.returncode)})")
-        if time.monotonic() > deadline:
-            give_up("the supervisor did not start its children in time")
-        time.sleep(0.1)  # polling a file the supervisor rewrites; bounded by the deadline
+        return False
+
+    if not poll_until(supervisor_running, max(wait, 30.0), interval=0.1):
+        give_up("the supervisor did not start its children in time")
     if output is not None:
         print(f"supervisor pid {popen.pid}, run folder {run_dir}", file=output, flush=True)
     services = info.get("services", [])
@@ -300,12 +300,9 @@ def stop_run(run_dir: Path, timeout: float = 40.0, output=sys.stdout) -> int:
               + (f" (removed stale {', '.join(stale)})" if stale else ""), file=output)
         return 0
     os.kill(pid, signal.SIGTERM)
-    deadline = time.monotonic() + timeout
-    while pid_alive(pid):
-        if time.monotonic() > deadline:
-            print(f"supervisor {pid} still running after {timeout:.0f} s", file=sys.stderr)
-            return 1
-        time.sleep(0.1)  # not our child: poll its pid, bounded by the deadline
+    if not poll_until(lambda: not pid_alive(pid), timeout, interval=0.1):  # (not our child: no wait())
+        print(f"supervisor {pid} still running after {timeout:.0f} s", file=sys.stderr)
+        return 1
     status = read_status(run_dir) or {}
     exit_code = status.get("supervisor", {}).get("exit_code")
     for name, child in status.get("children", {}).items():

@@ -4,8 +4,9 @@ experiments' viewers and recorders): its output in a log file, waits on what it 
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+from balltrack.common.waiting import poll_until
 
 
 class Command:
@@ -25,15 +26,20 @@ class Command:
     def wait_for(self, pattern: str, timeout: float = 60.0) -> re.Match:
         """The first match of the regular expression ``pattern`` in the output, once it comes;
         RuntimeError when the command exits or ``timeout`` passes first."""
-        deadline = time.monotonic() + timeout
-        while True:
+        def not_found() -> RuntimeError:
+            return RuntimeError(f"balltrack {' '.join(self.popen.args[3:])}: no {pattern!r} "
+                                f"(exit {self.popen.poll()}): {self.output()[-500:]}")
+
+        def in_output() -> re.Match | None:
             found = re.search(pattern, self.output(), re.M)
-            if found:
-                return found
-            if self.popen.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"balltrack {' '.join(self.popen.args[3:])}: no {pattern!r} "
-                                   f"(exit {self.popen.poll()}): {self.output()[-500:]}")
-            time.sleep(0.05)  # polling the log; the deadline bounds it
+            if found is None and self.popen.poll() is not None:
+                raise not_found()
+            return found
+
+        found = poll_until(in_output, timeout)
+        if found is None:
+            raise not_found()
+        return found
 
     def stop(self, timeout: float = 30.0) -> int:
         """SIGTERM, then the exit status (SIGKILL after ``timeout``)."""

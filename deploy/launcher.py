@@ -17,10 +17,10 @@ restarted by the supervisor; one stopped with :meth:`System.stop_service` stays 
 import os
 import signal
 import sys
-import time
 from pathlib import Path
 
 from balltrack.common.network import free_port
+from balltrack.common.waiting import poll_until
 from balltrack.deploy.cli import LaunchError, Launched, launch, make_specs, read_pid, read_status, tail
 
 # Start order: the simulator last, so that the pipeline answers its first frame.
@@ -57,14 +57,16 @@ class System:
         if pid is None:
             raise LaunchError(f"{name} is not running (no {name}.pid in {self.run_dir})")
         os.kill(pid, signal.SIGTERM)
-        deadline = time.monotonic() + timeout
-        while True:
+
+        def replaced() -> tuple[dict] | None:
+            # (in the status file the supervisor rewrites; a tuple, as the child may be {})
             child = self.children().get(name, {})
-            if child.get("pid") != pid:
-                return child
-            if time.monotonic() > deadline:
-                raise LaunchError(f"{name} (pid {pid}) still running {timeout:g} s after SIGTERM")
-            time.sleep(0.05)  # polling the status file the supervisor rewrites; bounded by the deadline
+            return (child,) if child.get("pid") != pid else None
+
+        found = poll_until(replaced, timeout)
+        if found is None:
+            raise LaunchError(f"{name} (pid {pid}) still running {timeout:g} s after SIGTERM")
+        return found[0]
 
     def stop(self, timeout: float = 40.0) -> int:
         """Stop everything (services, then the router); the supervisor's exit status: 0 when

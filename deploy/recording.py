@@ -29,6 +29,7 @@ import zenoh
 from balltrack.common.keys import SERVICES, TABLE, Keys, stats_key
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.recording import MESSAGE_ENCODING, Recorder, RecordingFile
+from balltrack.common.waiting import poll_until
 
 # Every key whose messages have a schema: the fixed data keys of the contract, then stats.
 DATA_KEYS = tuple(spec.key for spec in TABLE if "<" not in spec.key and "->" not in spec.message)
@@ -269,10 +270,8 @@ def wait_routed(session, echo_session, timeout: float) -> bool:
     publisher = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     try:
         deadline = time.monotonic() + timeout
-        while not publisher.matching_status.matching:  # the router has told us of the echo
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.01)  # polling a status, bounded by the deadline
+        if not poll_until(lambda: publisher.matching_status.matching, timeout, interval=0.01):
+            return False  # the router has not told us of the echo
         publisher.put(b"")
         return arrived.wait(max(0.0, deadline - time.monotonic()))
     finally:

@@ -30,6 +30,7 @@ import zenoh
 from balltrack.common.arguments import integer, number
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
+from balltrack.common.waiting import poll_until
 from balltrack.deploy.command import Command
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.processes import cpu_seconds
@@ -135,11 +136,8 @@ def record_and_play(endpoint: str, folder: Path, frames: int, small: int, sessio
                                 *([] if foxglove else ["--no-foxglove"])], folder / f"{path.stem}.log")
             recorder.wait_for("recording")
             publisher = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-            deadline = time.monotonic() + 30
-            while not publisher.matching_status.matching:  # the recorder's subscription routed
-                if time.monotonic() > deadline:
-                    raise RuntimeError("the recorder never subscribed")
-                time.sleep(0.02)  # polling a status; the deadline bounds it
+            if not poll_until(lambda: publisher.matching_status.matching, 30, interval=0.02):
+                raise RuntimeError("the recorder never subscribed")  # (its subscription not routed)
             start = time.monotonic()
             for payload in payloads:
                 publisher.put(payload)

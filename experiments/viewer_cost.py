@@ -35,6 +35,7 @@ from balltrack.common.arguments import number
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.network import free_port
 from balltrack.common.session import open_session
+from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.base import quantile
 from balltrack.deploy.command import Command
@@ -96,11 +97,8 @@ def _measure(counters: Counters, pids: dict[str, int | None], seconds: float) ->
 
 def _wait_for_positions(counters: Counters, timeout: float = 120) -> None:
     """Until the system locates the ball (frames go through the whole pipeline)."""
-    deadline = time.monotonic() + timeout
-    while not counters.latencies:
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"no detected_ball_3d in {timeout:.0f} s")
-        time.sleep(0.1)  # polling the counters; the deadline bounds it
+    if not poll_until(lambda: counters.latencies, timeout, interval=0.1):
+        raise RuntimeError(f"no detected_ball_3d in {timeout:.0f} s")
 
 
 class BridgeLag:

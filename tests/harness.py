@@ -19,6 +19,7 @@ from balltrack.common.keys import Keys
 from balltrack.common.messages import decode, encode
 from balltrack.common.network import free_port  # noqa: F401  (tests import it from here too)
 from balltrack.common.session import open_session
+from balltrack.common.waiting import POLL_INTERVAL, poll_until
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -33,28 +34,23 @@ def process_environment() -> dict:
     return environment
 
 
-# How often ``wait_until`` looks again: what it polls (a file, /proc, a status) has no event to
-# wait on, and the deadline, not the interval, bounds the wait.
-POLL_INTERVAL = 0.05
-
-
 def wait_until(condition, timeout: float, what: str, *watched: "Process", every: float = POLL_INTERVAL):
-    """Poll ``condition()`` until it returns something truthy, and return that. Fails the test
-    (AssertionError naming ``what``) after ``timeout`` seconds, or as soon as one of the
-    ``watched`` processes has exited, with the end of its output."""
-    deadline = time.monotonic() + timeout
-    while True:
+    """Poll ``condition()`` (``common.waiting.poll_until``) until it returns something truthy,
+    and return that. Fails the test (AssertionError naming ``what``) after ``timeout`` seconds,
+    or as soon as one of the ``watched`` processes has exited, with the end of its output."""
+    def checked():
         result = condition()
-        if result:
-            return result
-        for process in watched:
+        for process in [] if result else watched:
             if process.popen.poll() is not None:
                 raise AssertionError(f"{process.arguments} exited {process.popen.returncode} while "
                                      f"waiting for {what}:\n{process.output()[-4000:]}")
-        if time.monotonic() > deadline:
-            logs = "".join(f"\n--- {process.arguments}\n{process.output()[-2000:]}" for process in watched)
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}{logs}")
-        time.sleep(every)
+        return result
+
+    result = poll_until(checked, timeout, every)
+    if result is None:
+        logs = "".join(f"\n--- {process.arguments}\n{process.output()[-2000:]}" for process in watched)
+        raise AssertionError(f"timed out after {timeout} s waiting for {what}{logs}")
+    return result
 
 
 class Process:
