@@ -58,17 +58,20 @@ def run(options) -> "ExperimentResult":
         latency = summary["latency_ms"]
         stats = summary.get("service_stats", {})
         detector_ms = stats.get("detector", {}).get("p50_ms")
+        locator_ms = stats.get("locator", {}).get("p50_ms")
         result.figure(f"{mode}/reached", summary["reached"])
         for key in ("detected_ball_3d", "cmd_vel"):
             for metric in ("p50_ms", "p99_ms", "count"):
                 result.figure(f"{mode}/{key}/{metric}", latency[key][metric])
         result.figure(f"{mode}/detector_handler_p50_ms", detector_ms)
+        result.figure(f"{mode}/locator_handler_p50_ms", locator_ms)
         result.figure(f"{mode}/render_ms", stats.get("simulator", {}).get("render_ms"))
         result.figure(f"{mode}/cmd_vel_per_s", summary["messages_per_s"].get("cmd_vel"))
         rows.append([mode, "yes" if summary["reached"] else "no",
                      f"{latency['detected_ball_3d']['p50_ms']:.1f} / {latency['detected_ball_3d']['p99_ms']:.1f}",
                      f"{latency['cmd_vel']['p50_ms']:.1f} / {latency['cmd_vel']['p99_ms']:.1f}",
                      "-" if detector_ms is None else f"{detector_ms:.1f}",
+                     "-" if locator_ms is None else f"{locator_ms:.2f}",
                      latency["detected_ball_3d"]["count"]])
     event = summaries["event"]
     ball, command = event["latency_ms"]["detected_ball_3d"], event["latency_ms"]["cmd_vel"]
@@ -83,7 +86,8 @@ def run(options) -> "ExperimentResult":
                 f"<= {GOAL_COMMAND_P50_MS:g} ms", f"{command['p50_ms']:.1f} ms",
                 reached and command["p50_ms"] <= GOAL_COMMAND_P50_MS)
     result.table(["follower mode", "reached", "frame -> 3D p50 / p99 (ms)",
-                  "frame -> cmd_vel p50 / p99 (ms)", "detector handler p50 (ms)", "frames"], rows,
+                  "frame -> cmd_vel p50 / p99 (ms)", "detector handler p50 (ms)",
+                  "locator handler p50 (ms)", "frames"], rows,
                  "The demo once per follower mode (arrival times at the demo's subscriber):")
     result.compare("frame -> cmd_vel", "not reported (10 Hz control loop)",
                    f"p50 {command['p50_ms']:.1f} ms (event mode), "

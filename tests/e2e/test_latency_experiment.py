@@ -15,6 +15,8 @@ def test_latency_experiment_reports_both_follower_modes(tmp_path):
         assert figures[f"latency/{mode}/detected_ball_3d/count"] > 100
         assert 0 < figures[f"latency/{mode}/detected_ball_3d/p50_ms"] <= figures[f"latency/{mode}/detected_ball_3d/p99_ms"]
         assert (tmp_path / "latency" / mode / "run.mcap").is_file()
+        # (the services' own processing time, from their stats: a part of the latency)
+        assert 0 < figures[f"latency/{mode}/locator_handler_p50_ms"] < figures[f"latency/{mode}/detected_ball_3d/p50_ms"]
     # Event mode commands on each of the 30 detections a second (and on the 10 Hz timer, the
     # search watchdog); the paper's mode on the timer alone.
     assert figures["latency/event/cmd_vel_per_s"] > 25
