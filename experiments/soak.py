@@ -34,6 +34,7 @@ from balltrack.common.messages import MessageError, decode
 from balltrack.common.session import open_session
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, quantile
+from balltrack.experiments.lags import ArrivalLags
 from balltrack.experiments.processes import resident_mb
 
 NAME = "soak"
@@ -51,8 +52,7 @@ class Counters:
     def __init__(self, session):
         self.lock = threading.Lock()
         self.frames = 0
-        self.image_arrival: dict[int, float] = {}
-        self.latencies: list[float] = []
+        self.frame_to_position = ArrivalLags()
         self.stats: dict[str, dict] = {}
         self._subscribers = [
             session.declare_subscriber(keys.IMAGE_RAW, self._on_image),
@@ -68,10 +68,7 @@ class Counters:
             return
         with self.lock:
             self.frames += 1
-            self.image_arrival.setdefault(seq, arrival)
-            if len(self.image_arrival) > 2000:  # positions come within a second; keep a few
-                for old in sorted(self.image_arrival)[:1000]:
-                    del self.image_arrival[old]
+            self.frame_to_position.start(seq, arrival)
 
     def _on_position(self, sample) -> None:
         arrival = time.monotonic()
@@ -80,9 +77,7 @@ class Counters:
         except MessageError:
             return
         with self.lock:
-            sent = self.image_arrival.get(seq)
-            if sent is not None:
-                self.latencies.append(arrival - sent)
+            self.frame_to_position.end(seq, arrival)
 
     def _on_stats(self, sample) -> None:
         try:
@@ -95,9 +90,13 @@ class Counters:
     def take(self) -> tuple[int, list[float], dict[str, dict]]:
         """(frames, latencies) since the last call, and the newest stats per service."""
         with self.lock:
-            frames, latencies = self.frames, self.latencies
-            self.frames, self.latencies = 0, []
-            return frames, latencies, dict(self.stats)
+            frames, self.frames = self.frames, 0
+            return frames, self.frame_to_position.take(), dict(self.stats)
+
+    def located(self) -> bool:
+        """Whether a position has come since the last ``take``."""
+        with self.lock:
+            return bool(self.frame_to_position.lags)
 
     def close(self) -> None:
         for subscriber in self._subscribers:

@@ -38,6 +38,7 @@ from balltrack.common.session import open_session
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.base import quantile
+from balltrack.experiments.lags import ArrivalLags
 from balltrack.deploy.command import Command
 from balltrack.experiments.processes import cpu_seconds
 from balltrack.experiments.soak import SCENARIO, Counters
@@ -97,7 +98,7 @@ def _measure(counters: Counters, pids: dict[str, int | None], seconds: float) ->
 
 def _wait_for_positions(counters: Counters, timeout: float = 120) -> None:
     """Until the system locates the ball (frames go through the whole pipeline)."""
-    if not poll_until(lambda: counters.latencies, timeout, interval=0.1):
+    if not poll_until(counters.located, timeout, interval=0.1):
         raise RuntimeError(f"no detected_ball_3d in {timeout:.0f} s")
 
 
@@ -107,8 +108,7 @@ class BridgeLag:
     def __init__(self, session):
         from balltrack.services.ros2_bridge import convert
 
-        self.lags: list[float] = []
-        self._arrival: dict[int, float] = {}
+        self.ball_to_twin = ArrivalLags(keep=1000)
         self._lock = threading.Lock()
 
         def on_ball(sample):
@@ -118,20 +118,21 @@ class BridgeLag:
             except MessageError:
                 return
             with self._lock:
-                self._arrival[stamp] = arrival
-                if len(self._arrival) > 1000:  # the twin comes within milliseconds; keep a few
-                    for old in sorted(self._arrival)[:500]:
-                        del self._arrival[old]
+                self.ball_to_twin.start(stamp, arrival)
 
         def on_ros(sample):
             arrival = time.monotonic()
             stamp = convert.stamp_from_ros(convert.deserialize(sample.payload.to_bytes(), convert.POINT_STAMPED).header)
             with self._lock:
-                if stamp in self._arrival:
-                    self.lags.append(arrival - self._arrival.pop(stamp))
+                self.ball_to_twin.end(stamp, arrival, once=True)
 
         self._subscribers = [session.declare_subscriber(keys.DETECTED_BALL_3D, on_ball),
                              session.declare_subscriber("ros/" + keys.DETECTED_BALL_3D, on_ros)]
+
+    def take(self) -> list[float]:
+        """The lags (s) since the last call."""
+        with self._lock:
+            return self.ball_to_twin.take()
 
     def close(self) -> None:
         for subscriber in self._subscribers:
@@ -183,9 +184,9 @@ def main(argv=None) -> int:
             try:
                 bridge.wait_for("routes:")
                 time.sleep(WARM_UP_SECONDS)
-                lag.lags.clear()
+                lag.take()
                 row = _measure(counters, {**detector, "viewer": bridge.pid}, args.seconds)
-                lags = list(lag.lags)
+                lags = lag.take()
             finally:
                 lag.close()
                 bridge.stop()
