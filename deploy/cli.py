@@ -396,7 +396,7 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     start.add_argument("--set", action="append", default=[], dest="overrides",
                        metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
     start.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
-    start.add_argument("--wait", type=number(above=0), default=60.0, metavar="SECONDS",
+    start.add_argument("--wait", type=number(minimum=0), default=60.0, metavar="SECONDS",
                        help="wait this long for the services' liveliness (0: do not wait)")
     start.add_argument("--foreground", action="store_true",
                        help="run the supervisor in this process (Ctrl-C stops everything)")

@@ -39,8 +39,8 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
-from balltrack.common.arguments import number
 from balltrack.common import keys as key_table
+from balltrack.common.arguments import number
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors

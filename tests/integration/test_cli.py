@@ -104,7 +104,7 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["hz"], "required"),
     (["echo", "detected_ball", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["status", "--timeout", "-1"], "--timeout: must be at least 0"),
-    (["deploy", "start", "--wait", "0"], "--wait: must be greater than 0"),
+    (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
 ])

@@ -78,3 +78,9 @@ def test_demo_refuses_bad_numbers_before_starting_anything(arguments, reason, ca
         main(arguments)
     assert exit_info.value.code == 2
     assert reason in capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_deploy_start_wait_0_still_means_do_not_wait():
+    from balltrack.deploy.cli import build_parser
+
+    assert build_parser().parse_args(["start", "--wait", "0"]).wait == 0
