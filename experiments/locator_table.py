@@ -19,8 +19,9 @@ import argparse
 
 import numpy as np
 
-from balltrack.services.locator.geometry import (CIRCLE_MODELS, Intrinsics, faithful_v_fov, locate_exact,
-                                       locate_faithful, project_sphere)
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful
+from balltrack.services.locator.projection import CIRCLE_MODELS, project_sphere
 
 WIDTH, HEIGHT = 640, 480
 H_FOV = 1.089

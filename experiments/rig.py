@@ -24,8 +24,9 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
 from balltrack.services.follower.config import FollowerConfig
 from balltrack.services.follower.controller import Command, FollowerController
-from balltrack.services.locator.geometry import (Intrinsics, Position3D, locate_exact, locate_faithful,
-                                       project_sphere, silhouette_ellipse)
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.geometry import Position3D, locate_exact, locate_faithful
+from balltrack.services.locator.projection import project_sphere, silhouette_ellipse
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.scenario import Scenario, parse_scenario
 from balltrack.services.simulator.sim import Simulation

@@ -25,7 +25,8 @@ import cv2
 import numpy as np
 import yaml
 
-DISTORTION_MODELS = ("plumb_bob", "none", "")
+from balltrack.common.pinhole import DISTORTION_MODELS, Intrinsics, check_intrinsics
+
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
 
 
@@ -46,31 +47,25 @@ class CameraModel:
     projection: tuple[float, ...] | None = field(default=None)
 
     def __post_init__(self):
-        if self.width <= 0 or self.height <= 0:
-            raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
-        for name in ("fx", "fy"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: must be a positive focal length in pixels, got {value!r}")
-        for name in ("cx", "cy"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name}: must be finite, got {getattr(self, name)!r}")
-        if len(self.distortion) not in (0, 4, 5, 8) or not all(math.isfinite(value) for value in self.distortion):
-            raise ValueError(f"distortion_coefficients: expected 0, 4, 5 or 8 finite numbers, "
-                             f"got {list(self.distortion)!r}")
+        check_intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height, self.distortion)
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The pinhole model of these frames, as the locator reads it from CameraInfo."""
+        return Intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height, self.distortion)
 
     @property
     def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+        return self.intrinsics.camera_matrix
 
     @property
     def hfov(self) -> float:
         """From the left to the right image border (radians), ignoring distortion."""
-        return math.atan(self.cx / self.fx) + math.atan((self.width - self.cx) / self.fx)
+        return self.intrinsics.h_fov
 
     @property
     def vfov(self) -> float:
-        return math.atan(self.cy / self.fy) + math.atan((self.height - self.cy) / self.fy)
+        return self.intrinsics.v_fov
 
     def camera_info(self) -> dict:
         """The CameraInfo message's fields besides the header."""
@@ -114,8 +109,9 @@ def _matrix(data: dict, name: str, rows: int, cols: int | Sequence[int]) -> list
     if entry.get("rows") != rows or entry.get("cols") not in allowed or len(values) != rows * entry["cols"]:
         raise ValueError(f"{name}: expected {rows}x{'/'.join(map(str, allowed))} with as many data, "
                          f"got rows={entry.get('rows')!r} cols={entry.get('cols')!r} and {len(values)} values")
-    if not all(isinstance(value, (int, float)) and not isinstance(value, bool) for value in values):
-        raise ValueError(f"{name}: data must be numbers")
+    if not all(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+               for value in values):
+        raise ValueError(f"{name}: data must be finite numbers")
     return [float(value) for value in values]
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from balltrack.common.config import check_fields, param
 
-from balltrack.services.locator.geometry import CIRCLE_MODELS
+from balltrack.services.locator.projection import CIRCLE_MODELS
 
 
 class LocatorMode(enum.StrEnum):

@@ -13,7 +13,8 @@ from balltrack.common import keys
 from balltrack.common.messages import MessageError
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.services.locator.config import LocatorConfig
-from balltrack.services.locator.geometry import Intrinsics, faithful_v_fov, locate_exact, locate_faithful
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful
 
 
 def build(service: ServiceContext):

@@ -7,7 +7,8 @@ import zenoh
 
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode
-from balltrack.services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.projection import project_sphere
 from tests.harness import Collector, draw_ball, floor_image, garbage_payloads, put_until, query_config
 
 WIDTH, HEIGHT = 640, 480

@@ -5,7 +5,8 @@ import math
 import pytest
 
 from balltrack.common.messages import encode, header
-from balltrack.services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.projection import project_sphere
 from tests.harness import Collector, garbage_payloads, put_until, query_config
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089

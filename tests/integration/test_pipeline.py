@@ -6,7 +6,8 @@ import pytest
 
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode, header
-from balltrack.services.locator.geometry import Intrinsics, project_sphere
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.projection import project_sphere
 from tests.harness import Collector, draw_ball, floor_image, put_until
 
 WIDTH, HEIGHT = 640, 480

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from balltrack.services.detector.detector import BallDetector
-from balltrack.services.locator.geometry import (Intrinsics, distorted_silhouette, locate_exact, outline_ellipse,
-                                                 project_sphere, silhouette_ellipse, undistort_circle)
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.geometry import locate_exact, undistort_circle
+from balltrack.services.locator.projection import (distorted_silhouette, outline_ellipse, project_sphere,
+                                                   silhouette_ellipse)
 
 WIDTH, HEIGHT = 640, 480
 FOCAL = 400.0  # a wide lens (77 degrees across), where distortion matters most

@@ -7,9 +7,9 @@ import pytest
 
 from balltrack.common.config import ConfigError, load_config, replace_config
 from balltrack.services.locator.config import LocatorConfig
-from balltrack.services.locator.geometry import (CIRCLE_MODELS, Intrinsics, circle_radius, faithful_v_fov,
-                                       locate_exact, locate_faithful, project_sphere,
-                                       silhouette_ellipse)
+from balltrack.common.pinhole import Intrinsics
+from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful
+from balltrack.services.locator.projection import CIRCLE_MODELS, circle_radius, project_sphere, silhouette_ellipse
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089
 BALL_RADIUS = 0.033
