@@ -43,6 +43,14 @@ import numpy as np  # noqa: E402
 from balltrack.common.geometry import wrap_angle  # noqa: E402
 from balltrack.common.memory import release_freed_memory  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
+from balltrack.services.simulator.requests import (  # noqa: E402
+    ball_index,
+    ball_position,
+    checked_request,
+    finite_number,
+    light_level,
+    robot_position,
+)
 from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
 from balltrack.services.simulator.world import (  # noqa: E402
     CAMERA_NAME,
@@ -61,31 +69,6 @@ ABSURD_LINEAR = 100.0
 ABSURD_ANGULAR = 100.0
 # A ball this close to the camera plane (m) counts as not in front of it.
 MIN_VISIBLE_DEPTH = 1e-3
-COMMAND_OPS = ("reset", "set_light", "place_ball", "place_robot")
-
-
-def _finite_number(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    return number
-
-
-def _light_level(name: str, value: Any) -> tuple[float, float, float]:
-    """A grey level or an [r, g, b] list, each in [0, 1]."""
-    if isinstance(value, (list, tuple)):
-        if len(value) != 3:
-            raise ValueError(f"{name}: expected a number or [r, g, b], got {len(value)} values")
-        channels = tuple(_finite_number(f"{name}[{index}]", item)
-                         for index, item in enumerate(value))
-    else:
-        level = _finite_number(name, value)
-        channels = (level, level, level)
-    if any(not 0.0 <= channel <= 1.0 for channel in channels):
-        raise ValueError(f"{name}: values must be between 0 and 1, got {list(channels)}")
-    return channels
 
 
 def _release_gl_context() -> None:
@@ -219,9 +202,9 @@ class Simulation:
         was; other values are clamped to max_linear / max_angular. The command holds until the
         next one, or until cmd_timeout simulated seconds pass without one (safety stop).
         """
-        linear = _finite_number("linear", linear)
-        angular = _finite_number("angular", angular)
-        stamp = self.time if sim_time is None else _finite_number("sim_time", sim_time)
+        linear = finite_number("linear", linear)
+        angular = finite_number("angular", angular)
+        stamp = self.time if sim_time is None else finite_number("sim_time", sim_time)
         if abs(linear) > ABSURD_LINEAR:
             raise ValueError(f"linear: {linear:g} m/s is not a plausible command")
         if abs(angular) > ABSURD_ANGULAR:
@@ -422,18 +405,7 @@ class Simulation:
         scenario) changes nothing: every argument is validated before anything is applied.
         """
         try:
-            if not isinstance(request, dict):
-                raise ValueError(f"expected a map with an 'op', got {type(request).__name__}")
-            op = request.get("op")
-            if op not in COMMAND_OPS:
-                raise ValueError(f"op: must be one of {', '.join(COMMAND_OPS)}, got {op!r}")
-            arguments = {key: value for key, value in request.items() if key != "op"}
-            allowed = {"reset": {"scenario"}, "set_light": {"diffuse", "ambient"},
-                       "place_ball": {"id", "position"}, "place_robot": {"x", "y", "yaw"}}[op]
-            unknown = sorted(set(arguments) - allowed)
-            if unknown:
-                raise ValueError(f"{op}: unknown argument {unknown[0]!r} "
-                                 f"(allowed: {', '.join(sorted(allowed))})")
+            op, arguments = checked_request(request)
             getattr(self, op)(**arguments)
         except (ValueError, TypeError, KeyError) as error:
             return {"ok": False, "error": str(error)}
@@ -460,9 +432,9 @@ class Simulation:
         if diffuse is None and ambient is None:
             raise ValueError("set_light: give diffuse and/or ambient")
         model = self._model
-        new_diffuse = (_light_level("diffuse", diffuse) if diffuse is not None
+        new_diffuse = (light_level("diffuse", diffuse) if diffuse is not None
                        else tuple(float(value) for value in model.light_diffuse[self._light_id]))
-        new_ambient = (_light_level("ambient", ambient) if ambient is not None
+        new_ambient = (light_level("ambient", ambient) if ambient is not None
                        else tuple(float(value) for value in model.light_ambient[self._light_id]))
         self._apply_light(new_diffuse, new_ambient)
 
@@ -481,41 +453,18 @@ class Simulation:
     @_locked
     def place_ball(self, id: Any = None, position: Any = None) -> None:
         """Move ball ``id`` to [x, y] (resting on the floor) or [x, y, z]; stops its script."""
-        if id is None:
-            raise ValueError("place_ball: missing 'id'")
-        ids = [ball.id for ball in self.scenario.balls]
-        if str(id) not in ids or isinstance(id, bool):
-            raise ValueError(f"id: no ball {id!r} (balls: {', '.join(ids) or 'none'})")
-        index = ids.index(str(id))
-        ball = self.scenario.balls[index]
-        if not isinstance(position, (list, tuple)) or len(position) not in (2, 3):
-            raise ValueError(f"position: expected [x, y] or [x, y, z], got {position!r}")
-        values = [_finite_number(f"position[{axis}]", value) for axis, value in enumerate(position)]
-        limit = self.scenario.half_size - ball.radius
-        if abs(values[0]) > limit or abs(values[1]) > limit:
-            raise ValueError(f"position: ({values[0]:g}, {values[1]:g}) is outside the world "
-                             f"(|x|, |y| must be <= {limit:g})")
-        if len(values) == 2:
-            values.append(ball.radius)
-        if not 0.0 <= values[2] <= 10.0:
-            raise ValueError(f"position: z must be between 0 and 10 m, got {values[2]:g}")
+        index = ball_index(id, [ball.id for ball in self.scenario.balls])
+        values = ball_position(position, self.scenario.balls[index].radius, self.scenario.half_size)
         self._scripted[index] = False
-        self._ball_positions[index] = tuple(values)
+        self._ball_positions[index] = values
         self._update_balls()
         mujoco.mj_forward(self._model, self._data)
 
     @_locked
     def place_robot(self, x: Any = None, y: Any = None, yaw: Any = None) -> None:
         """Teleport the robot to (x, y) and heading yaw (default: keep), standing still."""
-        if x is None or y is None:
-            raise ValueError("place_robot: 'x' and 'y' are required")
-        new_x = _finite_number("x", x)
-        new_y = _finite_number("y", y)
-        new_yaw = self.robot_pose()[2] if yaw is None else _finite_number("yaw", yaw)
-        limit = self.scenario.robot_limit
-        if abs(new_x) > limit or abs(new_y) > limit:
-            raise ValueError(f"x, y: ({new_x:g}, {new_y:g}) is outside the world "
-                             f"(|x|, |y| must be <= {limit:g})")
+        new_x, new_y = robot_position(x, y, self.scenario.robot_limit)
+        new_yaw = self.robot_pose()[2] if yaw is None else finite_number("yaw", yaw)
         qx, qy, qyaw = self._qpos_index
         self._data.qpos[qx], self._data.qpos[qy], self._data.qpos[qyaw] = new_x, new_y, new_yaw
         self._data.qvel[self._qvel_index] = 0.0

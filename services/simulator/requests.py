@@ -1,0 +1,90 @@
+"""SimCommand requests checked before the simulation changes: a request from the network
+(``sim/control``) is either wholly valid or refused with a one-line reason, never half applied.
+Pure functions, no MuJoCo: :class:`sim.Simulation` applies what they return."""
+
+import math
+from typing import Any
+
+# Each op and the arguments it takes (all optional in the request: an op says what it needs).
+COMMAND_ARGUMENTS = {"reset": {"scenario"}, "set_light": {"diffuse", "ambient"},
+                     "place_ball": {"id", "position"}, "place_robot": {"x", "y", "yaw"}}
+COMMAND_OPS = tuple(COMMAND_ARGUMENTS)
+# The height range (m) a placed ball's centre may be given.
+MAX_BALL_HEIGHT = 10.0
+
+
+def finite_number(name: str, value: Any) -> float:
+    """``value`` as a float; ValueError naming ``name`` for a non-number or a non-finite one."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name}: must be finite, got {value!r}")
+    return number
+
+
+def light_level(name: str, value: Any) -> tuple[float, float, float]:
+    """A grey level or an [r, g, b] list, each in [0, 1]."""
+    if isinstance(value, (list, tuple)):
+        if len(value) != 3:
+            raise ValueError(f"{name}: expected a number or [r, g, b], got {len(value)} values")
+        channels = tuple(finite_number(f"{name}[{index}]", item)
+                         for index, item in enumerate(value))
+    else:
+        level = finite_number(name, value)
+        channels = (level, level, level)
+    if any(not 0.0 <= channel <= 1.0 for channel in channels):
+        raise ValueError(f"{name}: values must be between 0 and 1, got {list(channels)}")
+    return channels
+
+
+def checked_request(request: Any) -> tuple[str, dict[str, Any]]:
+    """The op of a SimCommand request and its arguments; ValueError for anything but a map
+    with a known ``op`` and only that op's argument names (the values are checked by the op)."""
+    if not isinstance(request, dict):
+        raise ValueError(f"expected a map with an 'op', got {type(request).__name__}")
+    op = request.get("op")
+    if op not in COMMAND_OPS:
+        raise ValueError(f"op: must be one of {', '.join(COMMAND_OPS)}, got {op!r}")
+    arguments = {key: value for key, value in request.items() if key != "op"}
+    allowed = COMMAND_ARGUMENTS[op]
+    unknown = sorted(set(arguments) - allowed)
+    if unknown:
+        raise ValueError(f"{op}: unknown argument {unknown[0]!r} (allowed: {', '.join(sorted(allowed))})")
+    return op, arguments
+
+
+def ball_index(ball_id: Any, ids: list[str]) -> int:
+    """Which of the scenario's balls ``ball_id`` names; ValueError listing them otherwise."""
+    if ball_id is None:
+        raise ValueError("place_ball: missing 'id'")
+    if isinstance(ball_id, bool) or str(ball_id) not in ids:
+        raise ValueError(f"id: no ball {ball_id!r} (balls: {', '.join(ids) or 'none'})")
+    return ids.index(str(ball_id))
+
+
+def ball_position(position: Any, radius: float, half_size: float) -> tuple[float, float, float]:
+    """A ball's new centre from [x, y] (resting on the floor) or [x, y, z], inside the world."""
+    if not isinstance(position, (list, tuple)) or len(position) not in (2, 3):
+        raise ValueError(f"position: expected [x, y] or [x, y, z], got {position!r}")
+    values = [finite_number(f"position[{axis}]", value) for axis, value in enumerate(position)]
+    limit = half_size - radius
+    if abs(values[0]) > limit or abs(values[1]) > limit:
+        raise ValueError(f"position: ({values[0]:g}, {values[1]:g}) is outside the world "
+                         f"(|x|, |y| must be <= {limit:g})")
+    if len(values) == 2:
+        values.append(radius)
+    if not 0.0 <= values[2] <= MAX_BALL_HEIGHT:
+        raise ValueError(f"position: z must be between 0 and {MAX_BALL_HEIGHT:g} m, got {values[2]:g}")
+    return values[0], values[1], values[2]
+
+
+def robot_position(x: Any, y: Any, limit: float) -> tuple[float, float]:
+    """The robot's new (x, y), both required, within ``limit`` of the world's centre."""
+    if x is None or y is None:
+        raise ValueError("place_robot: 'x' and 'y' are required")
+    new_x, new_y = finite_number("x", x), finite_number("y", y)
+    if abs(new_x) > limit or abs(new_y) > limit:
+        raise ValueError(f"x, y: ({new_x:g}, {new_y:g}) is outside the world "
+                         f"(|x|, |y| must be <= {limit:g})")
+    return new_x, new_y
