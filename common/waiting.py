@@ -10,6 +10,7 @@ Example::
         ...  # not there in 30 s
 """
 
+import threading
 import time
 from typing import Callable, TypeVar
 
@@ -20,10 +21,12 @@ T = TypeVar("T")
 POLL_INTERVAL = 0.05
 
 
-def poll_until(condition: Callable[[], T], timeout: float, interval: float = POLL_INTERVAL) -> T | None:
+def poll_until(condition: Callable[[], T], timeout: float, interval: float = POLL_INTERVAL,
+               stop: threading.Event | None = None) -> T | None:
     """``condition()``'s first truthy value, read every ``interval`` seconds (and once more at
-    the deadline); None when ``timeout`` seconds pass first. An exception from ``condition``
-    ends the wait (a way to give up early: the process being waited for has exited)."""
+    the deadline); None when ``timeout`` seconds pass first, or as soon as ``stop`` is set (a
+    Ctrl-C while waiting). An exception from ``condition`` ends the wait (a way to give up
+    early: the process being waited for has exited)."""
     deadline = time.monotonic() + timeout
     while True:
         result = condition()
@@ -32,4 +35,7 @@ def poll_until(condition: Callable[[], T], timeout: float, interval: float = POL
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             return None
-        time.sleep(min(interval, remaining))
+        if stop is None:
+            time.sleep(min(interval, remaining))
+        elif stop.wait(min(interval, remaining)):
+            return None

@@ -28,7 +28,6 @@ import argparse
 import json
 import math
 import os
-import queue
 import signal
 import sys
 import threading
@@ -36,238 +35,27 @@ import time
 from importlib import resources
 from pathlib import Path
 
-import msgpack
 import numpy as np
 
 from balltrack.common import keys as key_table
 from balltrack.common.arguments import number
 from balltrack.common.keys import Keys
-from balltrack.common.messages import MessageError, decode
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
 from balltrack.common.session import ArgumentParser, close_session, open_session, secure_client_path
 from balltrack.common.shutdown import set_from_signal
+from balltrack.common.waiting import poll_until
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.command import Command
+from balltrack.deploy.demo_observer import Observer, VideoWriter
 from balltrack.deploy.launcher import SERVICES, start_system
 from balltrack.deploy.recording import DEFAULT_KEYS
 
 DEMO_CONFIG = resources.files("balltrack.deploy") / "config" / "demo"
-# Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
-# detector compute the colour mask for nobody).
-COUNTED_KEYS = (key_table.IMAGE_RAW, key_table.CAMERA_INFO, key_table.DETECTED_BALL,
-                key_table.DETECTED_BALLS, key_table.DETECTED_BALL_3D, key_table.CMD_VEL,
-                key_table.IMAGE_OUT, key_table.CLOCK, key_table.GROUND_TRUTH)
-# run.mcap (`balltrack play`, `balltrack info`): every data and stats key but image_tuning (as
-# above) and image_out (video.mp4 shows it; the raw frames are enough to replay the run).
+# run.mcap (`balltrack play`, `balltrack info`): every data and stats key but image_tuning
+# (subscribing to it would make the detector compute the colour mask for nobody) and image_out
+# (video.mp4 shows it; the raw frames are enough to replay the run).
 RECORDED_KEYS = tuple(key for key in DEFAULT_KEYS
                       if key not in (key_table.IMAGE_TUNING, key_table.IMAGE_OUT))
-
-
-def percentile(values: list[float], q: float) -> float | None:
-    return float(np.percentile(values, q)) if values else None
-
-
-class VideoWriter(threading.Thread):
-    """Writes ``image_out`` frames (with the 3D estimate of the same frame) to an mp4 file.
-
-    Frames come from a bounded queue so the subscriber callback never blocks; a frame that
-    skips sequence numbers (the detector dropped frames under load) is repeated so the video
-    keeps the simulation's timing."""
-
-    def __init__(self, path: Path, fps: float, estimates: dict):
-        super().__init__(name="demo-video", daemon=True)
-        self.path = path
-        self.fps = fps
-        self.frames: queue.Queue = queue.Queue(maxsize=60)
-        self.estimates = estimates
-        self.written = 0
-        self.picture = None
-        self.picture_distance = 0.6  # frame.png: the first frame with the ball this close
-        self._writer = None
-        self._last_seq = None
-        self.failed = 0
-        self.last_image = None
-
-    def offer(self, message: dict) -> None:
-        try:
-            self.frames.put_nowait(message)
-        except queue.Full:
-            pass
-
-    def run(self) -> None:
-        import cv2
-
-        from balltrack.common.images import image_to_bgr
-
-        while True:
-            message = self.frames.get()
-            if message is None:
-                break
-            try:
-                self._write(message, cv2, image_to_bgr)
-            except Exception as error:  # one bad frame must not end the video
-                if not self.failed:
-                    print(f"demo: video frame skipped: {error!r}", file=sys.stderr)
-                self.failed += 1
-        if self._writer is not None:
-            self._writer.release()
-
-    def _write(self, message: dict, cv2, image_to_bgr) -> None:
-        image = np.array(image_to_bgr(message))  # a writable copy: the overlay draws on it
-        seq = message["header"]["seq"]
-        estimate = self.estimates.get(seq)
-        if estimate is not None:
-            text = (f"ball x {estimate['x']:+.2f}  y {estimate['y']:+.2f}  z {estimate['z']:.2f}  "
-                    f"d {estimate['distance']:.2f} m")
-            height = image.shape[0]
-            cv2.rectangle(image, (0, height - 30), (image.shape[1], height), (0, 0, 0), -1)
-            cv2.putText(image, text, (10, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
-                        (255, 255, 255), 1, cv2.LINE_AA)
-            if estimate["distance"] <= self.picture_distance and self.picture is None:
-                self.picture = image.copy()
-        if self._writer is None:
-            height, width = image.shape[:2]
-            self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"),
-                                           self.fps, (width, height))
-        repeats = 1 if self._last_seq is None else max(1, min(seq - self._last_seq, 10))
-        self._last_seq = seq
-        for _ in range(repeats):
-            self._writer.write(image)
-            self.written += 1
-        self.last_image = image
-
-    def finish(self) -> None:
-        try:
-            self.frames.put(None, timeout=10)
-        except queue.Full:
-            pass
-        self.join(30)
-
-
-class Observer:
-    """This program's own subscriber: counts, arrival times, data for the figures, the referee."""
-
-    def __init__(self, session, namespace: str, referee: Referee, video: VideoWriter | None):
-        self.keys = Keys(namespace)
-        self.referee = referee
-        self.video = video
-        self.lock = threading.Lock()
-        self.counts = {key: 0 for key in COUNTED_KEYS if key != key_table.IMAGE_OUT or video}
-        self.image_arrival: dict[int, float] = {}
-        self.ball_arrival: dict[int, float] = {}
-        self.command_arrival: dict[int, float] = {}
-        self.estimates: list[tuple[float, dict]] = []  # (sim stamp s, Ball3D)
-        self.estimate_by_seq: dict[int, dict] = video.estimates if video else {}
-        self.commands: list[tuple[float, dict]] = []
-        self.truths: list[tuple[float, dict]] = []
-        self.latest_truth: tuple[float, float, dict] | None = None  # (sim s, wall arrival, truth)
-        self.start: float | None = None  # sim time at which the scenario (re)started
-        self.reached = threading.Event()
-        self.simulator_stats: dict = {}
-        self.stats: dict[str, dict] = {}
-        self._entities = []
-        handlers = {key_table.IMAGE_RAW: self._on_image, key_table.DETECTED_BALL_3D: self._on_ball,
-                    key_table.CMD_VEL: self._on_command, key_table.GROUND_TRUTH: self._on_truth,
-                    key_table.IMAGE_OUT: self._on_image_out}
-        for key in self.counts:
-            self._entities.append(session.declare_subscriber(
-                self.keys(key), self._counting(key, handlers.get(key))))
-        self._entities.append(session.declare_subscriber(self.keys("*/stats"), self._on_stats))
-
-    def close(self) -> None:
-        for entity in self._entities:
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
-
-    def _counting(self, key: str, handler):
-        def on_sample(sample):
-            arrival = time.monotonic()
-            with self.lock:
-                self.counts[key] += 1
-            if handler is not None:
-                try:
-                    handler(sample.payload.to_bytes(), arrival)
-                except (MessageError, KeyError, TypeError, ValueError):
-                    pass
-        return on_sample
-
-    def _on_image(self, payload: bytes, arrival: float) -> None:
-        seq = msgpack.unpackb(payload, raw=False)["header"]["seq"]  # only the header is needed
-        with self.lock:
-            self.image_arrival.setdefault(seq, arrival)
-
-    def _on_ball(self, payload: bytes, arrival: float) -> None:
-        ball = decode("Ball3D", payload)
-        seq = ball["header"]["seq"]
-        with self.lock:
-            self.ball_arrival.setdefault(seq, arrival)
-            self.estimate_by_seq[seq] = ball
-            if self.start is not None:
-                self.estimates.append((ball["header"]["stamp"] / 1e9 - self.start, ball))
-
-    def _sim_now(self, arrival: float) -> float | None:
-        if self.latest_truth is None:
-            return None
-        stamp, wall, _ = self.latest_truth
-        return stamp + (arrival - wall)
-
-    def _on_command(self, payload: bytes, arrival: float) -> None:
-        twist = decode("Twist", payload)
-        with self.lock:
-            now = self._sim_now(arrival)
-            tick = twist.get("time")
-            # The follower's tick time when it runs on simulated time, else the arrival time.
-            t = tick / 1e9 if isinstance(tick, int) and now is not None and abs(tick / 1e9 - now) < 5 else now
-            if twist.get("mode") != "search":
-                self.command_arrival.setdefault(twist["header"]["seq"], arrival)
-            if self.start is not None and t is not None:
-                self.commands.append((t - self.start, twist))
-
-    def _on_truth(self, payload: bytes, arrival: float) -> None:
-        truth = decode("GroundTruth", payload)
-        stamp = truth["header"]["stamp"] / 1e9
-        with self.lock:
-            self.latest_truth = (stamp, arrival, truth)
-            if self.start is None:
-                return
-            t = stamp - self.start
-            self.truths.append((t, truth))
-            if self.referee.update(t, truth):
-                self.reached.set()
-
-    def _on_image_out(self, payload: bytes, arrival: float) -> None:
-        self.video.offer(decode("Image", payload))
-
-    def _on_stats(self, sample) -> None:
-        try:
-            stats = decode("Stats", sample.payload.to_bytes())
-        except MessageError:
-            return
-        with self.lock:
-            self.stats[stats["service"]] = stats
-
-    def begin(self, sim_time: float) -> None:
-        """The scenario (re)started at ``sim_time``: counts and figures start from here."""
-        with self.lock:
-            self.start = sim_time
-            self.counts = {key: 0 for key in self.counts}
-            self.ball_arrival.clear()
-            self.command_arrival.clear()
-            self.estimates.clear()
-            self.commands.clear()
-            self.truths.clear()
-
-    def latencies(self) -> dict:
-        with self.lock:
-            result = {}
-            for name, arrivals in (("detected_ball_3d", self.ball_arrival), ("cmd_vel", self.command_arrival)):
-                values = [1000 * (arrival - self.image_arrival[seq]) for seq, arrival in arrivals.items()
-                          if seq in self.image_arrival and arrival >= self.image_arrival[seq]]
-                result[name] = {"p50_ms": percentile(values, 50), "p99_ms": percentile(values, 99),
-                                "count": len(values)}
-            return result
 
 
 # The recorder leaves each message this long before compressing it: the pipeline has answered
@@ -309,14 +97,6 @@ def stop_recording(recorder: Command, run_dir: Path) -> None:
     status = recorder.stop(timeout=60)
     if status != 0:
         print(f"demo: the recorder exited with status {status} (see {run_dir}/record.log)", file=sys.stderr)
-
-
-def wait_until(predicate, timeout: float, stop: threading.Event) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline or stop.wait(0.05):
-            return False
-    return True
 
 
 def run(args) -> int:
@@ -363,8 +143,8 @@ def run(args) -> int:
             return 1
         # The pipeline is up once the detector answers frames; then the scenario restarts so the
         # run starts with every service ready.
-        if not wait_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
-                          and observer.latest_truth is not None, args.start_timeout, stop):
+        if not poll_until(lambda: observer.counts[key_table.DETECTED_BALLS] > 0
+                          and observer.latest_truth is not None, args.start_timeout, stop=stop):
             if not stop.is_set():
                 print("demo: the pipeline produced no detected_balls in time", file=sys.stderr)
             return 1
@@ -375,7 +155,7 @@ def run(args) -> int:
             print(f"demo: sim/control reset failed: {reply.get('error')}", file=sys.stderr)
             return 1
         seen = observer.counts[key_table.GROUND_TRUTH]
-        wait_until(lambda: observer.counts[key_table.GROUND_TRUTH] > seen, 10, stop)
+        poll_until(lambda: observer.counts[key_table.GROUND_TRUTH] > seen, 10, stop=stop)
         observer.begin(observer.latest_truth[0])
         print(f"demo: all services alive; scenario restarted; chasing (limit {args.time_limit:.0f} s)",
               flush=True)

@@ -1,6 +1,7 @@
 """common.waiting.poll_until: the one polling loop."""
 
 import itertools
+import threading
 
 import pytest
 
@@ -25,3 +26,16 @@ def test_an_exception_ends_the_wait():
 
     with pytest.raises(RuntimeError, match="exited"):
         poll_until(exited, timeout=60)
+
+
+def test_a_set_stop_event_ends_the_wait_at_once():
+    stop = threading.Event()
+    reads = itertools.count()
+
+    def stopped_on_third_read():
+        if next(reads) == 2:
+            stop.set()
+        return False
+
+    assert poll_until(stopped_on_third_read, timeout=60, interval=0.001, stop=stop) is None
+    assert next(reads) == 3  # not read again once stop was set
