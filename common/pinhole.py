@@ -8,6 +8,8 @@ from typing import Mapping
 
 import numpy as np
 
+from balltrack.common.messages import MAX_IMAGE_SIDE, shorten
+
 DISTORTION_MODELS = ("plumb_bob", "", "none")
 
 
@@ -72,7 +74,8 @@ class Intrinsics:
 def check_intrinsics(fx: float, fy: float, cx: float, cy: float, width: int, height: int,
                      distortion: tuple[float, ...]) -> None:
     """ValueError naming the first number that no camera has: a focal length that is not a
-    positive number of pixels, a principal point that is not finite, an empty image, or
+    positive number of pixels, a principal point that is not finite, an empty or absurdly large
+    image (the contract's CameraInfo bound), or
     distortion coefficients other than 0, 4, 5 or 8 finite numbers."""
     for name, value in (("fx", fx), ("fy", fy)):
         if not (math.isfinite(value) and value > 0.0):
@@ -80,7 +83,8 @@ def check_intrinsics(fx: float, fy: float, cx: float, cy: float, width: int, hei
     for name, value in (("cx", cx), ("cy", cy)):
         if not math.isfinite(value):
             raise ValueError(f"{name}: must be finite, got {value!r}")
-    if width <= 0 or height <= 0:
-        raise ValueError(f"image size (width x height) must be positive, got {width}x{height}")
+    if not (0 < width <= MAX_IMAGE_SIDE and 0 < height <= MAX_IMAGE_SIDE):
+        raise ValueError(f"image size (width x height) must be 1 to {MAX_IMAGE_SIDE} pixels a side, "
+                         f"got {shorten(width, 20)}x{shorten(height, 20)}")
     if len(distortion) not in (0, 4, 5, 8) or not all(math.isfinite(value) for value in distortion):
         raise ValueError(f"distortion: expected 0, 4, 5 or 8 finite coefficients, got {distortion!r}")

@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 import yaml
 
+from balltrack.common.messages import shorten
 from balltrack.common.pinhole import DISTORTION_MODELS, Intrinsics, check_intrinsics
 
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
@@ -109,17 +110,25 @@ def _matrix(data: dict, name: str, rows: int, cols: int | Sequence[int]) -> list
     if entry.get("rows") != rows or entry.get("cols") not in allowed or len(values) != rows * entry["cols"]:
         raise ValueError(f"{name}: expected {rows}x{'/'.join(map(str, allowed))} with as many data, "
                          f"got rows={entry.get('rows')!r} cols={entry.get('cols')!r} and {len(values)} values")
-    if not all(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-               for value in values):
-        raise ValueError(f"{name}: data must be finite numbers")
-    return [float(value) for value in values]
+    numbers = []
+    for value in values:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{name}: data must be numbers")
+        try:
+            number = float(value)
+        except OverflowError:  # a YAML integer past a float's range
+            number = math.inf
+        if not math.isfinite(number):
+            raise ValueError(f"{name}: data must be finite numbers, got {shorten(value, 40)}")
+        numbers.append(number)
+    return numbers
 
 
 def parse_calibration(text: str, source: str = "calibration") -> CameraModel:
     """A CameraModel from ROS camera_info YAML text; ValueError naming the bad field."""
     try:
         data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
+    except (yaml.YAMLError, ValueError) as error:  # (ValueError: an integer of over 4300 digits)
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise ValueError(f"{source}: not valid YAML ({reason})") from None
     if not isinstance(data, dict):

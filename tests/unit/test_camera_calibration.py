@@ -189,6 +189,9 @@ def test_ros_yaml_is_read_and_written_back():
      "distortion_coefficients"),
     (("data: [430.2, 0, 306.7", "data: [-430.2, 0, 306.7"), "fx"),
     (("camera_matrix:", "camera_matrix: [1, 2]\nx:"), "camera_matrix"),
+    (("image_width: 640", "image_width: 99999999999"), "image size"),
+    (("data: [430.2, 0, 306.7", "data: [" + "4" * 400 + ", 0, 306.7"), "camera_matrix: data must be finite"),
+    (("data: [430.2, 0, 306.7", "data: [" + "4" * 5000 + ", 0, 306.7"), "not valid YAML"),
 ])
 def test_bad_calibration_files_name_the_field(edit, field):
     with pytest.raises(ValueError, match=field) as raised:
