@@ -22,6 +22,7 @@ import time
 from balltrack.common import keys
 from balltrack.common.config import ConfigError
 from balltrack.common.images import bgr_to_message
+from balltrack.common.memory import keep_freed_memory
 from balltrack.common.messages import MessageError, encode, header
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.services.camera.calibration import CameraModel, pinhole, read_calibration
@@ -37,6 +38,8 @@ def build(service: ServiceContext):
     except (SourceError, ValueError) as error:
         raise ConfigError(str(error)) from None
     started_with = config
+    # Each frame's message is a new megabyte or more: kept, not faulted in again (common/memory.py).
+    keep_freed_memory()
     images = service.publisher(keys.IMAGE_RAW, "Image")
     infos = service.publisher(keys.CAMERA_INFO, "CameraInfo")
     feed = FrameFeed(spec, reader, lambda: service.config, service.stop, service.log)

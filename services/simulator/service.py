@@ -34,6 +34,7 @@ import zenoh
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message
 from balltrack.common.config import ConfigError
+from balltrack.common.memory import keep_freed_memory
 from balltrack.common.messages import MessageError, decode, encode, header, shorten
 from balltrack.common.runner import ServiceContext, run_service
 from balltrack.common.status import liveliness_keys
@@ -67,6 +68,8 @@ def build(service: ServiceContext):
     output_files = OutputFiles.from_config(service.config)
     simulation = Simulation(service.config)
     simulation.render_view("front")  # the first render compiles shaders: not in frame 1's time
+    # Each frame's message is a new megabyte: kept, not faulted in again (common/memory.py).
+    keep_freed_memory()
     # Lockstep must not lose a frame (it would wait for an answer that cannot come).
     block = {"congestion_control": zenoh.CongestionControl.BLOCK}
     images = service.publisher(keys.IMAGE_RAW, "Image",
