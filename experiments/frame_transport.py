@@ -26,6 +26,7 @@ import argparse
 import io
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -46,6 +47,9 @@ SMALL_BYTES = 100
 # A message's first 16 bytes: its put time (CLOCK_MONOTONIC ns) and its index (-1: warm-up).
 STAMP_BYTES = 16
 START_TIMEOUT = 30.0
+# How long the last messages may take to arrive before a run is read as it stands (a message
+# that never comes shows in the "arrived" column).
+ARRIVAL_TIMEOUT = 5.0
 MODES = ("on", "off")
 
 
@@ -66,10 +70,11 @@ def stamped(index: int, template: bytearray) -> bytes:
     return bytes(template)
 
 
-def subscriber(endpoint: str, shared_memory: bool) -> int:
-    """A subscriber process: prints ``ready``, then ``warm`` at its first arrival and ``shm`` at
-    its first shared-memory one; when its stdin closes, one JSON line: the latencies (ms) of
-    the measured messages and how many came as shared memory."""
+def subscriber(endpoint: str, shared_memory: bool, expected: int) -> int:
+    """A subscriber process: prints ``ready``, then ``warm`` at its first arrival, ``shm`` at
+    its first shared-memory one and ``all`` once ``expected`` measured messages have come; when
+    its stdin closes, one JSON line: the latencies (ms) of the measured messages and how many
+    came as shared memory."""
     keep_freed_memory()  # as the services that take every frame do (common/memory.py)
     session = open_client(endpoint, shared_memory)
     lock = threading.Lock()
@@ -95,6 +100,8 @@ def subscriber(endpoint: str, shared_memory: bool) -> int:
             if index >= 0:
                 latencies.append((arrival - sent) / 1e6)
                 counts["shared"] += in_shared_memory
+                if len(latencies) >= expected:
+                    say("all")
 
     entity = session.declare_subscriber(KEY, on_sample)
     print("ready", flush=True)
@@ -109,14 +116,14 @@ def subscriber(endpoint: str, shared_memory: bool) -> int:
 class Subscribers:
     """The subscriber processes of one run; their output in log files."""
 
-    def __init__(self, endpoint: str, shared_memory: bool, count: int, folder: Path, name: str):
+    def __init__(self, endpoint: str, shared_memory: bool, count: int, expected: int, folder: Path, name: str):
         self.logs = [folder / f"{name}-subscriber-{index}.log" for index in range(count)]
         self.processes = []
         for log in self.logs:
             with open(log, "w") as output:
                 self.processes.append(subprocess.Popen(
                     [sys.executable, "-m", "balltrack.experiments.frame_transport", "--subscriber", endpoint,
-                     "--shared-memory", "on" if shared_memory else "off"],
+                     "--shared-memory", "on" if shared_memory else "off", "--expect", str(expected)],
                     stdin=subprocess.PIPE, stdout=output, stderr=subprocess.STDOUT, text=True))
 
     def all_said(self, word: str) -> bool:
@@ -150,7 +157,7 @@ def measure(endpoint: str, mode: str, size: int, count: int, rate: float, subscr
     template = bytearray(size)
     shared_memory = mode == "on"
     session = open_client(endpoint, shared_memory)
-    group = Subscribers(endpoint, shared_memory, subscribers, folder, f"{mode}-{size}")
+    group = Subscribers(endpoint, shared_memory, subscribers, count, folder, f"{mode}-{size}")
     try:
         if not poll_until(lambda: group.all_said("ready"), START_TIMEOUT):
             raise RuntimeError(f"the subscribers did not start in {START_TIMEOUT:g} s")
@@ -159,12 +166,8 @@ def measure(endpoint: str, mode: str, size: int, count: int, rate: float, subscr
         # the lazily made shared-memory pool is in use), so the measured messages are alike.
         wanted = "shm" if shared_memory and size > SMALL_BYTES else "warm"
 
-        def put(index: int) -> None:
-            payload = stamped(index, template)
-            publisher.put(payload)
-
         def warmed() -> bool:
-            put(-1)
+            publisher.put(stamped(-1, template))
             return group.all_said(wanted)
 
         if not poll_until(warmed, START_TIMEOUT, interval=1.0 / rate):
@@ -173,9 +176,9 @@ def measure(endpoint: str, mode: str, size: int, count: int, rate: float, subscr
         due = time.monotonic()
         for index in range(count):
             due += period
-            put(index)
-            time.sleep(max(0.0, due - time.monotonic()))
-        time.sleep(0.2)  # (the last puts reach the subscribers)
+            publisher.put(stamped(index, template))
+            time.sleep(max(0.0, due - time.monotonic()))  # (pacing: the next message's time)
+        poll_until(lambda: group.all_said("all"), ARRIVAL_TIMEOUT)
         results = group.finish()
         publisher.undeclare()
     finally:
@@ -201,32 +204,44 @@ def row(result: dict) -> str:
             f"{' / '.join(ms(value) for value in result['subscriber_p50_ms'])} | {100 * result['shared_share']:.0f} % |")
 
 
+def run_all(args) -> list[dict]:
+    """Frames, then small messages, each with shared memory on and off, over one router."""
+    results = []
+    with tempfile.TemporaryDirectory(prefix="frame-transport-") as folder, \
+            start_system(Path(folder) / "run", services=(), output=io.StringIO()) as system:
+        for size in (FRAME_BYTES + STAMP_BYTES, SMALL_BYTES):
+            for mode in MODES:
+                results.append(measure(system.endpoint, mode, size, args.count, args.rate,
+                                       args.subscribers, Path(folder)))
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m balltrack.experiments.frame_transport",
-                                     description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.experiments.frame_transport", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--count", type=integer(minimum=1), default=300, help="messages per run (default 300)")
     parser.add_argument("--rate", type=number(above=0.0), default=30.0, help="messages per second (default 30)")
     parser.add_argument("--subscribers", type=integer(minimum=1), default=3,
                         help="subscriber processes (default 3, as the demo's frames have)")
     parser.add_argument("--subscriber", metavar="ENDPOINT", help=argparse.SUPPRESS)
     parser.add_argument("--shared-memory", choices=("on", "off"), default="on", help=argparse.SUPPRESS)
+    parser.add_argument("--expect", type=integer(minimum=1), default=1, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.subscriber:
-        return subscriber(args.subscriber, args.shared_memory == "on")
+        return subscriber(args.subscriber, args.shared_memory == "on", args.expect)
+    # SIGTERM ends a run as Ctrl-C does: the subscribers and the router are stopped on the way out.
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     keep_freed_memory()  # as the services that publish every frame do (common/memory.py)
-    results = []
     try:
-        with tempfile.TemporaryDirectory(prefix="frame-transport-") as folder, \
-                start_system(Path(folder) / "run", services=(), output=io.StringIO()) as system:
-            for size in (FRAME_BYTES + STAMP_BYTES, SMALL_BYTES):
-                for mode in MODES:
-                    results.append(measure(system.endpoint, mode, size, args.count, args.rate,
-                                           args.subscribers, Path(folder)))
+        results = run_all(args)
     except (RuntimeError, OSError) as error:
         print(f"frame_transport: {error}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        return 130
+        print("frame_transport: stopped by a signal; no figures", file=sys.stderr)
+        return 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     lines = [f"put -> subscriber callback over a router on this host, {args.count} messages at "
              f"{args.rate:g} Hz to each of {args.subscribers} subscriber processes:",
              "| payload | shared memory | arrived | p50 (ms) | p90 (ms) | p50 per subscriber (ms) "

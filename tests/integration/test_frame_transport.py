@@ -2,8 +2,11 @@
 processes, with Zenoh's shared memory on and off (a short run; the figures are the benchmark's)."""
 
 import re
+import signal
 import subprocess
 import sys
+
+from tests.harness import Process
 
 
 def test_frames_reach_every_subscriber_and_shared_memory_carries_them(capsys):
@@ -27,3 +30,11 @@ def test_bad_arguments_get_one_line_and_status_2():
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "--rate" in result.stderr
+
+
+def test_sigterm_stops_a_run_with_one_line(log_dir):
+    run = Process([sys.executable, "-m", "balltrack.experiments.frame_transport", "--count", "100000"],
+                  log_dir / "frame_transport.log")
+    run.wait_for_signal_handler(signal.SIGTERM, timeout=60)
+    assert run.stop() == 1
+    assert run.output() == "frame_transport: stopped by a signal; no figures\n"
