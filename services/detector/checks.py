@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import (FIXED_BITS, Candidate, box_around, disc,
+from balltrack.services.detector.geometry import (FIXED_BITS, Candidate, box_around, brightest_channel, disc,
                                                   fixed_point, fixed_radius, rim_directions)
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 
@@ -290,7 +290,7 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
 def lit_level(patch_bgr: np.ndarray, selected: np.ndarray) -> float:
     """The brightness (V, 0-255) of the lit side of the ``selected`` pixels of a BGR patch:
     LIT_SIDE_SHARE of them are at most this bright; at least 1."""
-    value = np.max(patch_bgr[selected > 0], axis=1)
+    value = brightest_channel(patch_bgr)[selected > 0]
     rank = int(LIT_SIDE_SHARE * (value.size - 1))
     return max(1.0, float(np.partition(value, rank)[rank]))
 

@@ -25,7 +25,7 @@ from balltrack.services.detector.checks import (NO_COLOUR, SURE_SIZE, CandidateM
                                                 colour_stats, judge, measure_mask)
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.fit import robust_circle
-from balltrack.services.detector.geometry import Candidate, box_around, disc
+from balltrack.services.detector.geometry import Candidate, box_around, brightest_channel, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes, hue_mask
 
 # Below this saturation (0-255) a pixel is near white and its hue is noise; paler pixels
@@ -89,7 +89,7 @@ def highlight_metrics(candidate: Candidate, mask: np.ndarray, planes: ColourPlan
     np.bitwise_and(colour, planes.mask[box], out=colour)
     if not cv2.countNonZero(colour):
         return None
-    value = np.max(patch, axis=2)
+    value = brightest_channel(patch)
     brightness = cv2.mean(value, colour)[0]
     joined = patch_mask.copy()
     joined[pale_pixels(patch, config, math.ceil(brightness)) & (patch_mask == 0)] = 255
@@ -134,7 +134,7 @@ def pale_middle(circle: Candidate, contour: np.ndarray, planes: ColourPlanes, co
         return False
     left, top, blob_width, blob_height = cv2.boundingRect(contour)
     blob = (slice(top, top + blob_height), slice(left, left + blob_width))
-    brightness = cv2.mean(np.max(planes.frame[blob], axis=2), cv2.inRange(planes.mask[blob], 255, 255))[0]
+    brightness = cv2.mean(brightest_channel(planes.frame[blob]), cv2.inRange(planes.mask[blob], 255, 255))[0]
     pale = pale_pixels(planes.frame[middle], config, math.ceil(brightness))
     return np.count_nonzero(pale) >= 0.5 * pale.size
 

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import brightest_channel
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
                                                  doubled_part, grown_box, half_value, regions_apply,
@@ -99,8 +100,7 @@ def reference_level(image_bgr: np.ndarray, value: np.ndarray | None = None) -> f
     """
     if value is None:
         small = quarter_sample(image_bgr)
-        value = cv2.max(cv2.max(cv2.extractChannel(small, 0), cv2.extractChannel(small, 1)),
-                        cv2.extractChannel(small, 2))
+        value = brightest_channel(small)
     last = value.size - 1
     median = np.partition(value.ravel(), last // 2)[last // 2]
     # The bright level of areas, not of single pixels: isolated glints, hot pixels and
@@ -122,8 +122,7 @@ def brighten(image_bgr: np.ndarray, gain: float, small: np.ndarray) -> np.ndarra
     gained = cv2.convertScaleAbs(image_bgr, alpha=gain)
     if float(small.max()) * gain <= 255.0:
         return gained
-    value = cv2.max(cv2.max(cv2.extractChannel(image_bgr, 0), cv2.extractChannel(image_bgr, 1)),
-                    cv2.extractChannel(image_bgr, 2))
+    value = brightest_channel(image_bgr)
     rows, columns = np.nonzero(value > 255.0 / gain)
     if rows.size:
         pixels = image_bgr[rows, columns].astype(np.float32)

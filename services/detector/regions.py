@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.geometry import brightest_channel
 
 # The coarse search: every this many pixels, each way.
 COARSE_STEP = 4
@@ -148,8 +149,7 @@ def half_value(frame: np.ndarray, rows: slice | None = None, columns: slice | No
     # of the pixels)
     half = cv2.resize(frame[2 * top:2 * bottom, 2 * left:2 * right], (right - left, bottom - top),
                       interpolation=cv2.INTER_AREA)
-    value = cv2.max(cv2.max(cv2.extractChannel(half, 0), cv2.extractChannel(half, 1)),
-                    cv2.extractChannel(half, 2))
+    value = brightest_channel(half)
     value = cv2.GaussianBlur(value, (3, 3), HALF_VALUE_SIGMA)
     return value[rows.start - top:rows.stop - top, columns.start - left:columns.stop - left]
 
