@@ -3,7 +3,7 @@
 Each blob proposes circles (its enclosing circle; unless that is a clean isolated ball, Hough's
 circles in its box, the circles of its outline's long arcs, the crescent of a washed-out
 highlight, the members of a cluster of touching balls and a ball in front of another), and
-each circle is refined on the mask's boundary and measured (``checks.py``) before step 7
+each circle is refined on the mask's boundary and measured (``measure.py``) before step 7
 judges it.
 """
 
@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.arcs import arc_proposals
-from balltrack.services.detector.checks import CandidateMetrics, colour_stats, judge, measure_mask
+from balltrack.services.detector.checks import CandidateMetrics, judge
+from balltrack.services.detector.measure import colour_stats, measure_mask
 from balltrack.services.detector.clusters import CLUSTER_MIN_SIZE, CLUSTER_SPREAD, Measured, cluster_candidates
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.fit import refine_on_boundary

@@ -7,7 +7,8 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, colour_stats, measure_mask
+from balltrack.services.detector.checks import CandidateMetrics
+from balltrack.services.detector.measure import NO_COLOUR, colour_stats, measure_mask
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.mask import EXPLAINED

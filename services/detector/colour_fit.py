@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import mean_hue
+from balltrack.services.detector.measure import mean_hue
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 
@@ -66,7 +66,7 @@ class ColourSamples:
     ball: np.ndarray
     other: np.ndarray
     # per ball with at least MIN_BALL_PIXELS shaping pixels: the hue (0-180) of their mean colour
-    # in the unblurred frame, as ``checks.colour_stats`` reads a candidate's
+    # in the unblurred frame, as ``measure.colour_stats`` reads a candidate's
     ball_hues: list[float] = field(default_factory=list)
     balls: int = 0  # balls sampled
 

@@ -17,7 +17,8 @@ import dataclasses
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, hue_in_range, measure_mask, rim_points
+from balltrack.services.detector.checks import CandidateMetrics, hue_in_range
+from balltrack.services.detector.measure import measure_mask, rim_points
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc
 from balltrack.services.detector.mask import EXPLAINED
@@ -84,7 +85,7 @@ def dark_around(frame: np.ndarray, mask: np.ndarray, ball: Candidate,
 
 def lit_rim_support(frame: np.ndarray, mask: np.ndarray, ball: Candidate) -> float:
     """The share of the rim's *lit* part that is a colour edge (colour just inside, none just
-    outside), the rim sampled as ``checks.measure_mask`` does.
+    outside), the rim sampled as ``measure.measure_mask`` does.
 
     A ball's outline under a distant light is half lit (outline and terminator are great
     circles of the sphere, crossing at two opposite points), and on the dark half nothing is a

@@ -15,8 +15,8 @@ module of this package:
    ``clusters.py`` reads a blob that is a cluster of touching balls as its member circles.
 6. ``fit.py`` refines each candidate by a robust least-squares circle fit to the mask's
    boundary pixels (pixels on the frame border are ignored, so a ball cut by the edge keeps its
-   true centre); ``checks.py`` measures it (fill, edge support, leak, colourfulness, hue of
-   the mean colour, roundness) and judges it; ``highlight.py`` measures a large candidate
+   true centre); ``measure.py`` measures it (fill, edge support, leak, colourfulness, hue of
+   the mean colour, roundness) and ``checks.py`` judges it; ``highlight.py`` measures a large candidate
    that fails again with the pale, bright pixels around it joined to the mask (a washed-out
    highlight that leaves only a crescent of colour, whose outer arc's circle it proposes);
    ``occlusion.py`` one whose mask ends along a straight edge across its disc with the part
@@ -56,7 +56,8 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.candidates import contour_candidates
-from balltrack.services.detector.checks import CandidateMetrics, judge, measure_mask
+from balltrack.services.detector.checks import CandidateMetrics, judge
+from balltrack.services.detector.measure import measure_mask
 from balltrack.services.detector.clusters import Measured
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look

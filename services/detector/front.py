@@ -19,7 +19,8 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, colour_stats, measure_mask
+from balltrack.services.detector.checks import CandidateMetrics
+from balltrack.services.detector.measure import colour_stats, measure_mask
 from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc, rim_directions
 from balltrack.services.detector.proposals import FrameSearch
 

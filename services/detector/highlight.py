@@ -21,8 +21,8 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import (NO_COLOUR, SURE_SIZE, CandidateMetrics, MaskMetrics,
-                                                colour_stats, judge, measure_mask)
+from balltrack.services.detector.checks import SURE_SIZE, CandidateMetrics, judge
+from balltrack.services.detector.measure import NO_COLOUR, MaskMetrics, colour_stats, measure_mask
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.fit import robust_circle
 from balltrack.services.detector.geometry import Candidate, box_around, brightest_channel, disc

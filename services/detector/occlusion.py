@@ -16,8 +16,8 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import (SURE_SIZE, CandidateMetrics, MaskMetrics, hue_in_range,
-                                                judge, measure_mask)
+from balltrack.services.detector.checks import SURE_SIZE, CandidateMetrics, hue_in_range, judge
+from balltrack.services.detector.measure import MaskMetrics, measure_mask
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, box_around, disc
 from balltrack.services.detector.mask import EXPLAINED

@@ -5,8 +5,8 @@ or a blown-out highlight is not the ball's colour but is still the ball. Per mas
 enclosing circle, and unless that circle is already a clean isolated ball,
 the Hough circle transform (cv2.HoughCircles with ``dp min_dist param1 param2``, radii in
 ``min_radius..max_radius``) inside the blob's box, which splits touching balls and finds balls
-joined to other yellow-green things. Proposals are refined (``fit.py``) and checked
-(``checks.py``) by the detector.
+joined to other yellow-green things. Proposals are refined (``fit.py``), measured
+(``measure.py``) and judged (``checks.py``) by the detector.
 """
 
 import dataclasses
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import lit_level
+from balltrack.services.detector.measure import lit_level
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
@@ -171,7 +171,7 @@ def blob_proposals(contour: np.ndarray, search: FrameSearch, mask: np.ndarray,
     (x, y), radius = cv2.minEnclosingCircle(contour)
     if blob_chroma < floor * planes.reference:
         # A ball in shade may be vivid only next to its own lit side (see
-        # checks.ColourMetrics.lit_colourfulness), which makes a ball only of a candidate
+        # measure.ColourMetrics.lit_colourfulness), which makes a ball only of a candidate
         # plainly one by its shape: a round blob by itself (LIT_ROUND_BLOB), its enclosing
         # circle the one proposal, nothing for Hough to split.
         if (area < LIT_ROUND_BLOB * math.pi * radius * radius

@@ -1,95 +1,18 @@
-"""Candidate checks (services/detector/checks.py): measurements on drawn masks, and judging."""
+"""Candidate judgement (services/detector/checks.py) of measured circles."""
 
 import dataclasses
 
-import cv2
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from balltrack.services.detector.checks import (CORNER_SPREAD, EDGE_STEPS, NO_COLOUR,
-                                                CandidateMetrics, ColourMetrics, MaskMetrics,
-                                                colour_stats, edge_spread, evenly_spaced,
-                                                failed_checks, hue_in_range, judge, mean_hue,
-                                                measure_mask)
+from balltrack.services.detector.checks import CandidateMetrics, failed_checks, hue_in_range, judge
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import Candidate, disc
-from balltrack.services.detector.mask import EXPLAINED, ColourMasker
-from tests.unit.detector.drawing import TENNIS_BGR, scene
+from balltrack.services.detector.measure import ColourMetrics, MaskMetrics
 
-SHAPE = (240, 320)
 GOOD_MASK = MaskMetrics(visible=1.0, support=0.95, leak=0.02, fill=0.97, outside=0.01, spread=0.02)
 GOOD_COLOUR = ColourMetrics(colourfulness=0.6, mean_hue=36.0, mean_chroma=120.0, colour_hue=36.0,
                             lit_colourfulness=0.6)
-
-
-def test_a_clean_disc_measures_as_a_ball():
-    x, y, radius = 160.3, 120.6, 25.0
-    metrics = measure_mask(Candidate(x, y, radius), disc(SHAPE, x, y, radius))
-    assert metrics.visible == 1.0
-    assert metrics.support == 1.0 and metrics.leak == 0.0
-    assert metrics.fill == 1.0 and metrics.outside == 0.0
-    assert metrics.spread < 0.03
-    assert CandidateMetrics(metrics, GOOD_COLOUR, size=5.0).clean
-
-
-def test_a_circle_inside_a_large_area_leaks_everywhere():
-    mask = np.full(SHAPE, 255, np.uint8)
-    metrics = measure_mask(Candidate(160.0, 120.0, 20.0), mask)
-    assert metrics.fill == 1.0 and metrics.outside == 1.0
-    assert metrics.leak == 1.0 and metrics.support == 0.0
-    assert not CandidateMetrics(metrics, GOOD_COLOUR, size=4.0).clean
-
-
-def test_a_disc_cut_by_the_frame_edge_shows_part_of_its_rim():
-    x, y, radius = 10.0, 120.0, 30.0
-    metrics = measure_mask(Candidate(x, y, radius), disc(SHAPE, x, y, radius))
-    # the rim samples left of x = 0 (inner or outer point) are out of the frame
-    assert 0.4 < metrics.visible < 0.7
-    assert metrics.support == 1.0 and metrics.fill == 1.0
-
-
-def test_explained_pixels_are_neither_mask_nor_not():
-    x, y, radius = 120.0, 120.0, 20.0
-    mask = disc(SHAPE, x, y, radius) | disc(SHAPE, x + 36.0, y, 16.0)  # a touching neighbour
-    candidate = Candidate(x, y, radius)
-    touching = measure_mask(candidate, mask)
-    assert touching.leak > 0.05 and touching.outside > 0.05
-    explained = mask.copy()
-    cv2.circle(explained, (156, 120), 18, EXPLAINED, -1)
-    cleared = measure_mask(candidate, explained)
-    assert cleared.visible < 1.0 and cleared.leak < 0.02 and cleared.outside == 0.0
-    everything = np.full(SHAPE, EXPLAINED, np.uint8)
-    assert measure_mask(candidate, everything) is None
-
-
-def test_a_square_has_corners():
-    square = np.zeros(SHAPE, np.uint8)
-    square[80:160, 120:200] = 255
-    candidate = Candidate(159.5, 119.5, 45.0)  # about the square's own circle
-    assert edge_spread(159.5, 119.5, 45.0, square, 96) > CORNER_SPREAD
-    assert edge_spread(160.0, 120.0, 40.0, disc(SHAPE, 160.0, 120.0, 40.0), 96) < 0.03
-    metrics = measure_mask(candidate, square)
-    assert metrics.spread > CORNER_SPREAD
-    # its four corners poke out of the circle in four places
-    assert metrics.leak_runs == 4
-    # a disc with a neighbour touching it leaks in one
-    pair = disc(SHAPE, 160.0, 120.0, 40.0) | disc(SHAPE, 230.0, 120.0, 30.0)
-    assert measure_mask(Candidate(160.0, 120.0, 40.0), pair).leak_runs == 1
-    assert measure_mask(Candidate(160.0, 120.0, 40.0), disc(SHAPE, 160.0, 120.0, 40.0)).leak_runs == 0
-    # too few rays with an edge: nothing to measure the spread on
-    assert edge_spread(160.0, 120.0, 40.0, np.zeros(SHAPE, np.uint8), 96) == 0.0
-
-
-@pytest.mark.parametrize("bgr, hue", [((0, 0, 255), 0.0), ((0, 255, 255), 30.0), ((0, 255, 0), 60.0),
-                                      ((255, 0, 0), 120.0), ((255, 0, 255), 150.0),
-                                      ((40, 40, 40), -1.0)])
-def test_mean_hue_is_opencvs_hue(bgr, hue):
-    assert mean_hue(bgr) == pytest.approx(hue)
-    if hue >= 0:
-        pixel = cv2.cvtColor(np.array([[bgr]], np.uint8), cv2.COLOR_BGR2HSV)[0, 0, 0]
-        assert abs(float(pixel) - hue) <= 0.5
 
 
 def test_hue_in_range_with_and_without_wrapping():
@@ -98,18 +21,6 @@ def test_hue_in_range_with_and_without_wrapping():
     assert not hue_in_range(24.0, config) and not hue_in_range(-1.0, config)
     red = DetectorConfig(h_min=170, h_max=8)
     assert hue_in_range(175.0, red) and hue_in_range(3.0, red) and not hue_in_range(30.0, red)
-
-
-def test_colour_stats_of_a_ball_and_of_no_colour():
-    image = scene([(160.0, 120.0, 25.0)], width=320, height=240)
-    planes = ColourMasker(DetectorConfig()).planes(image)
-    colour = colour_stats(Candidate(160.0, 120.0, 25.0), planes)
-    assert colour.colourfulness > DetectorConfig().min_colourfulness
-    assert abs(colour.mean_hue - mean_hue(TENNIS_BGR)) < 3.0
-    assert abs(colour.colour_hue - mean_hue(TENNIS_BGR)) < 3.0
-    assert colour.mean_chroma > 100
-    assert colour_stats(Candidate(40.0, 40.0, 15.0), planes) == NO_COLOUR  # no mask there
-    assert colour_stats(Candidate(-100.0, -100.0, 10.0), planes) == NO_COLOUR  # off the frame
 
 
 def test_judge_scores_a_ball():
@@ -224,22 +135,3 @@ def test_a_ball_plainly_round_may_be_vivid_next_to_its_own_lit_side():
     # pale (dull next to its own lit side too)
     pale = dataclasses.replace(shaded, lit_colourfulness=0.2)
     assert judge(CandidateMetrics(GOOD_MASK, pale, size=3.0), config) is None
-
-
-def test_lit_colourfulness_is_measured_next_to_the_balls_own_lit_side():
-    image = scene([(160.0, 120.0, 25.0)], width=320, height=240)
-    planes = ColourMasker(DetectorConfig()).planes(image)
-    bright = colour_stats(Candidate(160.0, 120.0, 25.0), planes)
-    # the ball is the frame's brightest thing: the reference level is its own lit side's
-    assert bright.lit_colourfulness == pytest.approx(bright.colourfulness)
-    # beside a white wall four times as bright: dull next to it, vivid next to its own lit side
-    dim = colour_stats(Candidate(160.0, 120.0, 25.0), dataclasses.replace(planes, reference=4 * planes.reference))
-    assert dim.colourfulness == pytest.approx(bright.colourfulness / 4)
-    assert dim.colourfulness < DetectorConfig().min_colourfulness < dim.lit_colourfulness
-
-
-def test_evenly_spaced_is_linspace_to_the_bit():
-    # (edge_spread's samples must be np.linspace's exactly: detections depend on them)
-    for radius in np.random.default_rng(5).uniform(1.0, 200.0, 500):
-        assert np.array_equal(evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS),
-                              np.linspace(0.7 * radius, 1.5 * radius, EDGE_STEPS))

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from balltrack.services.detector.checks import (CandidateMetrics, ColourMetrics, MaskMetrics,
-                                                measure_mask)
+from balltrack.services.detector.checks import CandidateMetrics
+from balltrack.services.detector.measure import ColourMetrics, MaskMetrics, measure_mask
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import dark_around, dark_side, lit_rim_support, second_look
 from balltrack.services.detector.geometry import Candidate

@@ -21,7 +21,8 @@ import pytest
 from balltrack.common.config import ConfigError, load_config
 from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
-from balltrack.services.detector.checks import NO_COLOUR, CandidateMetrics, MaskMetrics
+from balltrack.services.detector.checks import CandidateMetrics
+from balltrack.services.detector.measure import NO_COLOUR, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector import edges, fit, outline
 from balltrack.services.detector.detector import (STAGES, BallDetector, Detection, DetectionResult,

@@ -5,7 +5,8 @@ import dataclasses
 import cv2
 import numpy as np
 
-from balltrack.services.detector.checks import CandidateMetrics, ColourMetrics, MaskMetrics
+from balltrack.services.detector.checks import CandidateMetrics
+from balltrack.services.detector.measure import ColourMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 from balltrack.services.detector.geometry import disc

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from balltrack.services.detector.checks import CandidateMetrics, ColourMetrics, MaskMetrics, judge
+from balltrack.services.detector.checks import CandidateMetrics, judge
+from balltrack.services.detector.measure import ColourMetrics, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
 from balltrack.services.detector.geometry import Candidate, disc

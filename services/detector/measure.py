@@ -1,0 +1,250 @@
+"""Step 6's measurements of a candidate circle (see ``detector.py``): how it sits on the colour
+mask (``measure_mask``: fill, edge support, leak, the mask around it, the evenness of its edge)
+and the colour of its disc on the frame (``colour_stats``). ``checks.py`` judges what they
+measure.
+"""
+
+import functools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from balltrack.services.detector.geometry import (FIXED_BITS, Candidate, box_around, brightest_channel, disc,
+                                                  fixed_point, fixed_radius, rim_directions)
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
+
+# A ball's own lit side: this share of its colour pixels are at most that bright (V, the
+# brightest channel); the brightest few are glints and specular spots, not lit felt.
+LIT_SIDE_SHARE = 0.9
+# Samples along each ray when measuring how round a blob's edge is.
+EDGE_STEPS = 25
+
+
+class MeasuredOnFirstRead:
+    """A frozen dataclass's field that may be given a function of no arguments instead of its
+    value: the function is called, once, when the field is first read. (Most candidates fail a
+    cheaper check before ``judge`` reads their spread.)"""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._slot = "_" + name
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            raise AttributeError(self._slot)  # (the dataclass field has no default)
+        value = instance.__dict__[self._slot]
+        if callable(value):
+            value = value()
+            instance.__dict__[self._slot] = value
+        return value
+
+    def __set__(self, instance, value) -> None:
+        instance.__dict__[self._slot] = value
+
+
+@dataclass(frozen=True)
+class MaskMetrics:
+    """How a circle sits on the colour mask (all fractions 0-1 but ``spread``)."""
+
+    visible: float   # rim inside the frame and not explained (by an accepted ball)
+    support: float   # of that rim: mask just inside, not just outside
+    leak: float      # of that rim: mask just outside (the mask goes on past the rim)
+    fill: float      # mask fraction of the disc of 0.85 r
+    outside: float   # mask fraction of the ring from 1.15 r to 1.45 r
+    # spread of the mask edge's distance from the centre, over the radius (see edge_spread)
+    spread: float = MeasuredOnFirstRead()  # type: ignore[assignment]
+    leak_runs: int = 0  # separate stretches of the rim where the mask goes on past it
+
+
+@dataclass(frozen=True)
+class ColourMetrics:
+    """The colour of a circle's disc."""
+
+    colourfulness: float  # mean chroma of its mask pixels over the frame's reference level
+    mean_hue: float       # OpenCV hue (0-180) of the mean colour of the whole disc; -1: grey
+    mean_chroma: float    # chroma (raw units, max - min channel) of that mean colour
+    colour_hue: float     # hue of the mean colour of its mask pixels only; -1: grey
+    # The same mean chroma over the disc's own lit side (its mask pixels' LIT_SIDE_SHARE
+    # brightness level) where that is below the frame's reference level (measured when read).
+    # A ball in shade beside a brightly lit area (a white wall, a window) is dull next to the
+    # frame's bright level, but its felt is as vivid as ever next to the light that reaches it,
+    # which its lit side shows. Leaves in shade are vivid by this measure too: it serves only
+    # a candidate whose shape alone makes it plainly a ball (see judge).
+    lit_colourfulness: float = MeasuredOnFirstRead()  # type: ignore[assignment]
+
+
+NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0, colour_hue=-1.0,
+                          lit_colourfulness=0.0)
+
+
+def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: int) -> float:
+    """Spread (standard deviation over the radius) of the distance from the centre to the
+    mask's edge, along the rays that leave the mask between 0.7 r and 1.5 r.
+
+    About 0.03 for a ball's disc, 0.1 for a square; rays without such an edge (a touching
+    neighbour, the other colour of a two-colour ball, the frame border) are left out, and
+    with fewer than 6 rays left the spread is 0.
+    """
+    height, width = mask.shape
+    steps = evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS)
+    directions = rim_directions(samples)
+    columns = np.rint(x + directions[0][:, None] * steps[None, :]).astype(np.intp)
+    rows = np.rint(y + directions[1][:, None] * steps[None, :]).astype(np.intp)
+    if not well_inside(x, y, 1.5 * radius, width, height):
+        inside = ((columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)).all(axis=1)
+        if np.count_nonzero(inside) < 6:
+            return 0.0
+        rows, columns = rows[inside], columns[inside]
+    values = mask[rows, columns]
+    on = values == 255
+    first_off = np.argmin(on, axis=1)
+    # The ray starts in the mask, leaves it, and meets no explained (accepted ball) pixel first.
+    edges = steps[first_off]
+    valid = (on[:, 0] & ~on.all(axis=1) & ~(values == EXPLAINED).any(axis=1)
+             & (edges >= 0.85 * radius))
+    if np.count_nonzero(valid) < 6:
+        return 0.0
+    edges = edges[valid]
+    # (np.std's own steps, without its wrappers' overhead)
+    deviation = edges - np.add.reduce(edges) / edges.size
+    return float(np.sqrt(np.add.reduce(deviation * deviation) / edges.size)) / radius
+
+
+def evenly_spaced(start: float, stop: float, count: int) -> np.ndarray:
+    """``np.linspace(start, stop, count)``, computed as it does, without its wrapper's overhead
+    (per measured circle)."""
+    values = np.arange(float(count)) * ((stop - start) / (count - 1)) + start
+    values[-1] = stop
+    return values
+
+
+def well_inside(x: float, y: float, reach: float, width: int, height: int) -> bool:
+    """Whether every pixel rounded from within ``reach`` of (x, y) lies in a frame of
+    ``width`` x ``height`` (with a pixel to spare for rounding)."""
+    return reach + 1.0 <= min(x, y, width - 1.0 - x, height - 1.0 - y)
+
+
+def rim_samples(radius: float) -> int:
+    """How many points of a circle's rim the checks sample: about one per pixel, 24 to 96."""
+    return int(min(96, max(24, 2 * math.pi * radius)))
+
+
+def rim_points(x: float, y: float, radius: float, width: int, height: int) -> np.ndarray:
+    """Pixel pairs just inside and just outside a circle's rim, those in a ``width`` x
+    ``height`` frame: rows inner x, inner y, outer x, outer y, one column per rim sample."""
+    samples = rim_samples(radius)
+    offset = max(1.5, 0.15 * radius)
+    points = np.rint(np.array([[x], [y], [x], [y]])
+                     + np.array([[radius - offset], [radius - offset], [radius + offset],
+                                 [radius + offset]]) * rim_directions(samples)).astype(np.intp)
+    if not well_inside(x, y, radius + offset, width, height):
+        in_frame = ((points >= 0) & (points < np.array([[width], [height], [width], [height]]))).all(axis=0)
+        points = points[:, in_frame]
+    return points
+
+
+def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
+    """How a circle sits on ``mask`` (see MaskMetrics); None when too little of it can be judged.
+
+    ``mask`` is 255 (colour), 0 (not) or EXPLAINED (an accepted ball's disc: neither).
+    """
+    height, width = mask.shape
+    x, y, radius = candidate.x, candidate.y, candidate.radius
+    samples = rim_samples(radius)
+    points = rim_points(x, y, radius, width, height)
+    inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
+    known = (inner != EXPLAINED) & (outer != EXPLAINED)
+    known_count = int(np.count_nonzero(known))
+    if known_count < 4:
+        return None
+    inner_on, outer_on = inner[known] == 255, outer[known] == 255
+    # (measured when read: ``mask`` is not changed once candidates are measured on it)
+    roundness = functools.partial(edge_spread, x, y, radius, mask, samples)
+
+    outer_radius = 1.45 * radius + 2
+    box = box_around(x, y, outer_radius, width, height)
+    if box is None:
+        return None
+    patch = mask[box]
+    centre_x, centre_y = x - box[1].start, y - box[0].start
+    inside = disc(patch.shape, centre_x, centre_y, 0.85 * radius)
+    ring = disc(patch.shape, centre_x, centre_y, outer_radius)
+    cv2.circle(ring, fixed_point(centre_x, centre_y), fixed_radius(1.15 * radius + 1), 0, -1,
+               cv2.LINE_8, FIXED_BITS)
+    # (boolean planes: OpenCV's per-call overhead exceeds the work on a patch this small; only
+    # their counts are used)
+    on = patch == 255
+    usable = patch != EXPLAINED
+    inside &= usable
+    ring &= usable
+    inside_count = cv2.countNonZero(inside)
+    if inside_count == 0:
+        return None
+    ring_count = cv2.countNonZero(ring)
+    leak_count = int(np.count_nonzero(outer_on))
+    leak_runs = 0
+    if leak_count:  # (rim samples run round the circle: the last is next to the first)
+        leak_runs = max(1, int(np.count_nonzero(outer_on[1:] & ~outer_on[:-1]))
+                        + int(outer_on[0] and not outer_on[-1]))
+    return MaskMetrics(
+        visible=known_count / samples,
+        support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
+        leak=leak_count / known_count,
+        fill=cv2.countNonZero(on & inside) / inside_count,
+        outside=cv2.countNonZero(on & ring) / ring_count if ring_count else 0.0,
+        spread=roundness,
+        leak_runs=leak_runs)
+
+
+def mean_hue(bgr) -> float:
+    """OpenCV hue (0-180) of one BGR colour (floats); -1 for grey."""
+    blue, green, red = (float(channel) for channel in bgr)
+    high, low = max(blue, green, red), min(blue, green, red)
+    if high - low <= 1e-6:
+        return -1.0
+    if high == red:
+        degrees = 60.0 * (green - blue) / (high - low)
+    elif high == green:
+        degrees = 120.0 + 60.0 * (blue - red) / (high - low)
+    else:
+        degrees = 240.0 + 60.0 * (red - green) / (high - low)
+    return (degrees % 360.0) / 2.0
+
+
+def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
+    """The colour of a circle's disc (see ColourMetrics); NO_COLOUR when it holds no mask."""
+    height, width = planes.mask.shape
+    x, y, radius = candidate.x, candidate.y, candidate.radius
+    box = box_around(x, y, 0.85 * radius, width, height)
+    if box is None:
+        return NO_COLOUR
+    inside = disc((box[0].stop - box[0].start, box[1].stop - box[1].start),
+                  x - box[1].start, y - box[0].start, 0.85 * radius)
+    # (a boolean plane: OpenCV's per-call overhead exceeds the work on a disc this small)
+    selected = np.bitwise_and(inside, planes.mask[box] == 255)
+    if not cv2.countNonZero(selected):
+        return NO_COLOUR
+    # Averaging the unblurred disc recovers the hue that uint8 rounding hides in a very
+    # dark frame (a dim orange box can round to yellow pixel by pixel). Grey floor or
+    # black shade inside the disc does not move the hue of the mean.
+    mean_bgr = cv2.mean(planes.frame[box], inside)[:3]
+    chroma = cv2.mean(planes.chroma[box], selected)[0]
+    patch = planes.frame[box]
+
+    def lit_colourfulness() -> float:
+        return chroma / min(planes.reference, lit_level(patch, selected))
+
+    return ColourMetrics(colourfulness=chroma / planes.reference,
+                         mean_hue=mean_hue(mean_bgr),
+                         mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain,
+                         colour_hue=mean_hue(cv2.mean(patch, selected)[:3]),
+                         lit_colourfulness=lit_colourfulness)
+
+
+def lit_level(patch_bgr: np.ndarray, selected: np.ndarray) -> float:
+    """The brightness (V, 0-255) of the lit side of the ``selected`` pixels of a BGR patch:
+    LIT_SIDE_SHARE of them are at most this bright; at least 1."""
+    value = brightest_channel(patch_bgr)[selected > 0]
+    rank = int(LIT_SIDE_SHARE * (value.size - 1))
+    return max(1.0, float(np.partition(value, rank)[rank]))
