@@ -13,6 +13,7 @@ import numpy as np
 
 from balltrack.services.detector.geometry import (FIXED_BITS, Candidate, box_around, brightest_channel, disc,
                                                   fixed_point, fixed_radius, rim_directions)
+from balltrack.services.detector.jit import compiled
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 
 # A ball's own lit side: this share of its colour pixels are at most that bright (V, the
@@ -20,6 +21,9 @@ from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
 LIT_SIDE_SHARE = 0.9
 # Samples along each ray when measuring how round a blob's edge is.
 EDGE_STEPS = 25
+# measure_mask's areas around a circle: the disc of 0.85 r and the ring from 1.15 r + 1 to 1.45 r + 2.
+INSIDE = 2
+RING = 1
 
 
 class MeasuredOnFirstRead:
@@ -144,6 +148,28 @@ def rim_points(x: float, y: float, radius: float, width: int, height: int) -> np
     return points
 
 
+@compiled
+def area_counts(patch: np.ndarray, areas: np.ndarray) -> tuple[int, int, int, int]:
+    """Of a mask patch's pixels in ``areas``' INSIDE and RING: how many are usable (not
+    EXPLAINED), and how many of those are mask (255), in one pass: (inside, inside on mask,
+    ring, ring on mask). (A dozen whole-patch numpy calls did this, ~0.1 ms for a ball of
+    55 px radius.)"""
+    inside = inside_on = ring = ring_on = 0
+    for row in range(patch.shape[0]):
+        for column in range(patch.shape[1]):
+            area = areas[row, column]
+            value = patch[row, column]
+            if area == 0 or value == EXPLAINED:
+                continue
+            if area == INSIDE:
+                inside += 1
+                inside_on += value == 255
+            else:
+                ring += 1
+                ring_on += value == 255
+    return inside, inside_on, ring, ring_on
+
+
 def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     """How a circle sits on ``mask`` (see MaskMetrics); None when too little of it can be judged.
 
@@ -168,20 +194,17 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
         return None
     patch = mask[box]
     centre_x, centre_y = x - box[1].start, y - box[0].start
-    inside = disc(patch.shape, centre_x, centre_y, 0.85 * radius)
-    ring = disc(patch.shape, centre_x, centre_y, outer_radius)
-    cv2.circle(ring, fixed_point(centre_x, centre_y), fixed_radius(1.15 * radius + 1), 0, -1,
-               cv2.LINE_8, FIXED_BITS)
-    # (boolean planes: OpenCV's per-call overhead exceeds the work on a patch this small; only
-    # their counts are used)
-    on = patch == 255
-    usable = patch != EXPLAINED
-    inside &= usable
-    ring &= usable
-    inside_count = cv2.countNonZero(inside)
+    # One plane for both areas: the ring from 1.15 r + 1 to outer_radius is RING, the disc of
+    # 0.85 r inside it INSIDE (each drawn as a disc of its own would be).
+    areas = np.zeros(patch.shape, np.uint8)
+    centre = fixed_point(centre_x, centre_y)
+    cv2.circle(areas, centre, fixed_radius(outer_radius), RING, -1, cv2.LINE_8, FIXED_BITS)
+    cv2.circle(areas, centre, fixed_radius(1.15 * radius + 1), 0, -1, cv2.LINE_8, FIXED_BITS)
+    cv2.circle(areas, centre, fixed_radius(0.85 * radius), INSIDE, -1, cv2.LINE_8, FIXED_BITS)
+    # (contiguous, as ``areas`` is: one compiled signature, whichever view the patch is)
+    inside_count, inside_on, ring_count, ring_on = area_counts(np.ascontiguousarray(patch), areas)
     if inside_count == 0:
         return None
-    ring_count = cv2.countNonZero(ring)
     leak_count = int(np.count_nonzero(outer_on))
     leak_runs = 0
     if leak_count:  # (rim samples run round the circle: the last is next to the first)
@@ -191,8 +214,8 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
         visible=known_count / samples,
         support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
         leak=leak_count / known_count,
-        fill=cv2.countNonZero(on & inside) / inside_count,
-        outside=cv2.countNonZero(on & ring) / ring_count if ring_count else 0.0,
+        fill=inside_on / inside_count,
+        outside=ring_on / ring_count if ring_count else 0.0,
         spread=roundness,
         leak_runs=leak_runs)
 

@@ -5,13 +5,16 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from balltrack.services.detector.checks import CORNER_SPREAD, CandidateMetrics
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
-from balltrack.services.detector.measure import (EDGE_STEPS, NO_COLOUR, colour_stats, edge_spread, evenly_spaced,
-                                                 mean_hue, measure_mask)
+from balltrack.services.detector.measure import (EDGE_STEPS, INSIDE, NO_COLOUR, RING, area_counts, colour_stats,
+                                                 edge_spread, evenly_spaced, mean_hue, measure_mask)
 from tests.unit.detector.drawing import TENNIS_BGR, scene
 from tests.unit.detector.test_checks import GOOD_COLOUR
 
@@ -115,3 +118,15 @@ def test_evenly_spaced_is_linspace_to_the_bit():
     for radius in np.random.default_rng(5).uniform(1.0, 200.0, 500):
         assert np.array_equal(evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS),
                               np.linspace(0.7 * radius, 1.5 * radius, EDGE_STEPS))
+
+
+@settings(max_examples=60, deadline=None)
+@given(patch=arrays(np.uint8, st.tuples(st.integers(1, 30), st.integers(1, 30)),
+                    elements=st.sampled_from([0, 255, EXPLAINED])),
+       seed=st.integers(0, 2**32 - 1))
+def test_area_counts_are_the_usable_and_mask_pixels_of_each_area(patch, seed):
+    areas = np.random.default_rng(seed).choice(np.array([0, RING, INSIDE], np.uint8), patch.shape)
+    usable, on = patch != EXPLAINED, patch == 255
+    expected = tuple(int(np.count_nonzero(selected)) for selected in (
+        usable & (areas == INSIDE), on & (areas == INSIDE), usable & (areas == RING), on & (areas == RING)))
+    assert area_counts(patch, areas) == expected
