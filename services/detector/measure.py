@@ -82,6 +82,42 @@ NO_COLOUR = ColourMetrics(colourfulness=0.0, mean_hue=-1.0, mean_chroma=0.0, col
                           lit_colourfulness=0.0)
 
 
+@compiled
+def ray_edges(x: float, y: float, radius: float, mask: np.ndarray, cos: np.ndarray, sin: np.ndarray,
+              steps: np.ndarray) -> tuple[int, np.ndarray]:
+    """``edge_spread``'s rays: how many lie wholly in the frame, and the distance (one of
+    ``steps``) at which each of those that starts in the mask leaves it, with no explained
+    (accepted ball) pixel on it and the edge at least 0.85 r out, in ray order. (Numpy's
+    version made a dozen calls on 96 x 25 arrays per candidate, ~0.13 ms.)"""
+    height, width = mask.shape
+    edges = np.empty(cos.size)
+    count = in_frame = 0
+    columns = np.empty(steps.size, np.intp)
+    rows = np.empty(steps.size, np.intp)
+    for ray in range(cos.size):
+        whole = True
+        for step in range(steps.size):
+            columns[step] = np.intp(np.rint(x + cos[ray] * steps[step]))
+            rows[step] = np.intp(np.rint(y + sin[ray] * steps[step]))
+            if not (0 <= columns[step] < width and 0 <= rows[step] < height):
+                whole = False
+        if not whole:
+            continue
+        in_frame += 1
+        first_off = -1
+        explained = False
+        for step in range(steps.size):
+            value = mask[rows[step], columns[step]]
+            if value != 255 and first_off < 0:
+                first_off = step
+            if value == EXPLAINED:
+                explained = True
+        if first_off > 0 and not explained and steps[first_off] >= 0.85 * radius:
+            edges[count] = steps[first_off]
+            count += 1
+    return in_frame, edges[:count]
+
+
 def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: int) -> float:
     """Spread (standard deviation over the radius) of the distance from the centre to the
     mask's edge, along the rays that leave the mask between 0.7 r and 1.5 r.
@@ -90,26 +126,11 @@ def edge_spread(x: float, y: float, radius: float, mask: np.ndarray, samples: in
     neighbour, the other colour of a two-colour ball, the frame border) are left out, and
     with fewer than 6 rays left the spread is 0.
     """
-    height, width = mask.shape
     steps = evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS)
     directions = rim_directions(samples)
-    columns = np.rint(x + directions[0][:, None] * steps[None, :]).astype(np.intp)
-    rows = np.rint(y + directions[1][:, None] * steps[None, :]).astype(np.intp)
-    if not well_inside(x, y, 1.5 * radius, width, height):
-        inside = ((columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)).all(axis=1)
-        if np.count_nonzero(inside) < 6:
-            return 0.0
-        rows, columns = rows[inside], columns[inside]
-    values = mask[rows, columns]
-    on = values == 255
-    first_off = np.argmin(on, axis=1)
-    # The ray starts in the mask, leaves it, and meets no explained (accepted ball) pixel first.
-    edges = steps[first_off]
-    valid = (on[:, 0] & ~on.all(axis=1) & ~(values == EXPLAINED).any(axis=1)
-             & (edges >= 0.85 * radius))
-    if np.count_nonzero(valid) < 6:
+    in_frame, edges = ray_edges(x, y, radius, np.ascontiguousarray(mask), directions[0], directions[1], steps)
+    if in_frame < 6 or edges.size < 6:
         return 0.0
-    edges = edges[valid]
     # (np.std's own steps, without its wrappers' overhead)
     deviation = edges - np.add.reduce(edges) / edges.size
     return float(np.sqrt(np.add.reduce(deviation * deviation) / edges.size)) / radius

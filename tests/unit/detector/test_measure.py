@@ -11,10 +11,11 @@ from hypothesis.extra.numpy import arrays
 
 from balltrack.services.detector.checks import CORNER_SPREAD, CandidateMetrics
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import Candidate, disc
+from balltrack.services.detector.geometry import Candidate, disc, rim_directions
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
 from balltrack.services.detector.measure import (EDGE_STEPS, INSIDE, NO_COLOUR, RING, area_counts, colour_stats,
-                                                 edge_spread, evenly_spaced, mean_hue, measure_mask)
+                                                 edge_spread, evenly_spaced, mean_hue, measure_mask, ray_edges,
+                                                 rim_samples)
 from tests.unit.detector.drawing import TENNIS_BGR, scene
 from tests.unit.detector.test_checks import GOOD_COLOUR
 
@@ -130,3 +131,33 @@ def test_area_counts_are_the_usable_and_mask_pixels_of_each_area(patch, seed):
     expected = tuple(int(np.count_nonzero(selected)) for selected in (
         usable & (areas == INSIDE), on & (areas == INSIDE), usable & (areas == RING), on & (areas == RING)))
     assert area_counts(patch, areas) == expected
+
+
+@settings(max_examples=80, deadline=None)
+@given(x=st.floats(-5.0, 85.0), y=st.floats(-5.0, 65.0), radius=st.floats(1.0, 40.0),
+       seed=st.integers(0, 2**32 - 1))
+def test_ray_edges_are_where_each_ray_leaves_the_mask(x, y, radius, seed):
+    # a disc about the circle, with holes, specks and a few explained pixels; each ray checked
+    # step by step
+    rng = np.random.default_rng(seed)
+    mask = disc((60, 80), x + rng.normal(0.0, 2.0), y + rng.normal(0.0, 2.0), radius * rng.uniform(0.7, 1.6))
+    noise = rng.random((60, 80))
+    mask[noise < 0.03] = 0
+    mask[noise > 0.97] = 255
+    mask[(noise > 0.5) & (noise < 0.502)] = EXPLAINED
+    samples = rim_samples(radius)
+    directions = rim_directions(samples)
+    steps = evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS)
+    in_frame, edges = ray_edges(x, y, radius, mask, directions[0], directions[1], steps)
+    expected_in_frame, expected = 0, []
+    for cos, sin in zip(directions[0], directions[1]):
+        points = [(int(np.rint(y + sin * step)), int(np.rint(x + cos * step))) for step in steps]
+        if not all(0 <= row < 60 and 0 <= column < 80 for row, column in points):
+            continue
+        expected_in_frame += 1
+        values = [int(mask[point]) for point in points]
+        off = [index for index, value in enumerate(values) if value != 255]
+        if values[0] == 255 and off and EXPLAINED not in values and steps[off[0]] >= 0.85 * radius:
+            expected.append(steps[off[0]])
+    assert in_frame == expected_in_frame
+    assert edges.tolist() == expected
