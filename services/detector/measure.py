@@ -170,6 +170,43 @@ def rim_points(x: float, y: float, radius: float, width: int, height: int) -> np
 
 
 @compiled
+def rim_counts(mask: np.ndarray, x: float, y: float, inner_radius: float, outer_radius: float,
+               cos: np.ndarray, sin: np.ndarray) -> tuple[int, int, int, int]:
+    """``measure_mask``'s rim: of the pairs of pixels at ``inner_radius`` and ``outer_radius``
+    along each direction (``rim_points``' pairs, those in the frame), the pairs with neither
+    pixel explained (known), those of them with mask inside and not outside (support), with
+    mask outside (leak), and the separate runs of leaking pairs round the circle."""
+    height, width = mask.shape
+    known = support = leak = runs = 0
+    first_out = last_out = False
+    for index in range(cos.size):
+        inner_x = np.intp(np.rint(x + inner_radius * cos[index]))
+        inner_y = np.intp(np.rint(y + inner_radius * sin[index]))
+        outer_x = np.intp(np.rint(x + outer_radius * cos[index]))
+        outer_y = np.intp(np.rint(y + outer_radius * sin[index]))
+        if not (0 <= inner_x < width and 0 <= inner_y < height and 0 <= outer_x < width
+                and 0 <= outer_y < height):
+            continue
+        inner, outer = mask[inner_y, inner_x], mask[outer_y, outer_x]
+        if inner == EXPLAINED or outer == EXPLAINED:
+            continue
+        out = outer == 255
+        if out:
+            leak += 1
+            if known > 0 and not last_out:
+                runs += 1
+        elif inner == 255:
+            support += 1
+        if known == 0:
+            first_out = out
+        last_out = out
+        known += 1
+    if leak:  # (the pairs run round the circle: the last is next to the first)
+        runs = max(1, runs + (1 if first_out and not last_out else 0))
+    return known, support, leak, runs
+
+
+@compiled
 def area_counts(patch: np.ndarray, areas: np.ndarray) -> tuple[int, int, int, int]:
     """Of a mask patch's pixels in ``areas``' INSIDE and RING: how many are usable (not
     EXPLAINED), and how many of those are mask (255), in one pass: (inside, inside on mask,
@@ -199,13 +236,12 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     height, width = mask.shape
     x, y, radius = candidate.x, candidate.y, candidate.radius
     samples = rim_samples(radius)
-    points = rim_points(x, y, radius, width, height)
-    inner, outer = mask[points[1], points[0]], mask[points[3], points[2]]
-    known = (inner != EXPLAINED) & (outer != EXPLAINED)
-    known_count = int(np.count_nonzero(known))
+    offset = max(1.5, 0.15 * radius)
+    directions = rim_directions(samples)
+    known_count, support_count, leak_count, leak_runs = rim_counts(
+        np.ascontiguousarray(mask), x, y, radius - offset, radius + offset, directions[0], directions[1])
     if known_count < 4:
         return None
-    inner_on, outer_on = inner[known] == 255, outer[known] == 255
     # (measured when read: ``mask`` is not changed once candidates are measured on it)
     roundness = functools.partial(edge_spread, x, y, radius, mask, samples)
 
@@ -226,14 +262,9 @@ def measure_mask(candidate: Candidate, mask: np.ndarray) -> MaskMetrics | None:
     inside_count, inside_on, ring_count, ring_on = area_counts(np.ascontiguousarray(patch), areas)
     if inside_count == 0:
         return None
-    leak_count = int(np.count_nonzero(outer_on))
-    leak_runs = 0
-    if leak_count:  # (rim samples run round the circle: the last is next to the first)
-        leak_runs = max(1, int(np.count_nonzero(outer_on[1:] & ~outer_on[:-1]))
-                        + int(outer_on[0] and not outer_on[-1]))
     return MaskMetrics(
         visible=known_count / samples,
-        support=float(np.count_nonzero(inner_on & ~outer_on)) / known_count,
+        support=support_count / known_count,
         leak=leak_count / known_count,
         fill=inside_on / inside_count,
         outside=ring_on / ring_count if ring_count else 0.0,

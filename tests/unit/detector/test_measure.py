@@ -15,7 +15,7 @@ from balltrack.services.detector.geometry import Candidate, disc, rim_directions
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
 from balltrack.services.detector.measure import (EDGE_STEPS, INSIDE, NO_COLOUR, RING, area_counts, colour_stats,
                                                  edge_spread, evenly_spaced, mean_hue, measure_mask, ray_edges,
-                                                 rim_samples)
+                                                 rim_counts, rim_points, rim_samples)
 from tests.unit.detector.drawing import TENNIS_BGR, scene
 from tests.unit.detector.test_checks import GOOD_COLOUR
 
@@ -133,18 +133,24 @@ def test_area_counts_are_the_usable_and_mask_pixels_of_each_area(patch, seed):
     assert area_counts(patch, areas) == expected
 
 
+def blotchy_disc(x: float, y: float, radius: float, seed: int) -> np.ndarray:
+    """A 80x60 mask: a disc about the circle (x, y, radius), off centre and of another size,
+    with holes, specks and a few explained pixels."""
+    rng = np.random.default_rng(seed)
+    mask = disc((60, 80), x + rng.normal(0.0, 3.0), y + rng.normal(0.0, 3.0), radius * rng.uniform(0.7, 1.5))
+    noise = rng.random((60, 80))
+    mask[noise < 0.04] = 0
+    mask[noise > 0.96] = 255
+    mask[(noise > 0.5) & (noise < 0.51)] = EXPLAINED
+    return mask
+
+
 @settings(max_examples=80, deadline=None)
 @given(x=st.floats(-5.0, 85.0), y=st.floats(-5.0, 65.0), radius=st.floats(1.0, 40.0),
        seed=st.integers(0, 2**32 - 1))
 def test_ray_edges_are_where_each_ray_leaves_the_mask(x, y, radius, seed):
-    # a disc about the circle, with holes, specks and a few explained pixels; each ray checked
-    # step by step
-    rng = np.random.default_rng(seed)
-    mask = disc((60, 80), x + rng.normal(0.0, 2.0), y + rng.normal(0.0, 2.0), radius * rng.uniform(0.7, 1.6))
-    noise = rng.random((60, 80))
-    mask[noise < 0.03] = 0
-    mask[noise > 0.97] = 255
-    mask[(noise > 0.5) & (noise < 0.502)] = EXPLAINED
+    # each ray checked step by step
+    mask = blotchy_disc(x, y, radius, seed)
     samples = rim_samples(radius)
     directions = rim_directions(samples)
     steps = evenly_spaced(0.7 * radius, 1.5 * radius, EDGE_STEPS)
@@ -161,3 +167,23 @@ def test_ray_edges_are_where_each_ray_leaves_the_mask(x, y, radius, seed):
             expected.append(steps[off[0]])
     assert in_frame == expected_in_frame
     assert edges.tolist() == expected
+
+
+@settings(max_examples=80, deadline=None)
+@given(x=st.floats(-5.0, 85.0), y=st.floats(-5.0, 65.0), radius=st.floats(1.0, 40.0),
+       seed=st.integers(0, 2**32 - 1))
+def test_rim_counts_read_rim_points_pairs(x, y, radius, seed):
+    mask = blotchy_disc(x, y, radius, seed)
+    offset = max(1.5, 0.15 * radius)
+    directions = rim_directions(rim_samples(radius))
+    counts = rim_counts(mask, x, y, radius - offset, radius + offset, directions[0], directions[1])
+    # the pairs as rim_points gives them, read one by one
+    points = rim_points(x, y, radius, 80, 60)
+    pairs = [(int(mask[inner_y, inner_x]), int(mask[outer_y, outer_x]))
+             for inner_x, inner_y, outer_x, outer_y in points.T]
+    known = [(inner == 255, outer == 255) for inner, outer in pairs if EXPLAINED not in (inner, outer)]
+    leaking = [outer for _, outer in known]
+    runs = sum(1 for index in range(len(leaking)) if leaking[index] and not leaking[index - 1])
+    expected = (len(known), sum(1 for inner, outer in known if inner and not outer), sum(leaking),
+                max(1, runs) if any(leaking) else 0)
+    assert counts == expected
