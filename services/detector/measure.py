@@ -287,6 +287,36 @@ def mean_hue(bgr) -> float:
     return (degrees % 360.0) / 2.0
 
 
+@compiled
+def disc_colour_sums(patch: np.ndarray, mask: np.ndarray, chroma: np.ndarray, inside: np.ndarray):
+    """The exact sums ``colour_stats`` averages, in one pass over a disc's patch: of the
+    pixels in ``inside`` (non-zero), their count and B, G, R sums; of those on the colour
+    mask (255), the same, and their chroma's sum. (Six OpenCV calls and a boolean plane did
+    this, ~0.1 ms a candidate.)"""
+    inside_count = selected_count = chroma_sum = 0
+    inside_blue = inside_green = inside_red = selected_blue = selected_green = selected_red = 0
+    for row in range(patch.shape[0]):
+        for column in range(patch.shape[1]):
+            if inside[row, column] == 0:
+                continue
+            blue = np.int64(patch[row, column, 0])
+            green = np.int64(patch[row, column, 1])
+            red = np.int64(patch[row, column, 2])
+            inside_count += 1
+            inside_blue += blue
+            inside_green += green
+            inside_red += red
+            if mask[row, column] == 255:
+                selected_count += 1
+                selected_blue += blue
+                selected_green += green
+                selected_red += red
+                chroma_sum += chroma[row, column]
+    inside_sums = (inside_blue, inside_green, inside_red)
+    selected_sums = (selected_blue, selected_green, selected_red)
+    return inside_count, inside_sums, selected_count, selected_sums, chroma_sum
+
+
 def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
     """The colour of a circle's disc (see ColourMetrics); NO_COLOUR when it holds no mask."""
     height, width = planes.mask.shape
@@ -296,24 +326,29 @@ def colour_stats(candidate: Candidate, planes: ColourPlanes) -> ColourMetrics:
         return NO_COLOUR
     inside = disc((box[0].stop - box[0].start, box[1].stop - box[1].start),
                   x - box[1].start, y - box[0].start, 0.85 * radius)
-    # (a boolean plane: OpenCV's per-call overhead exceeds the work on a disc this small)
-    selected = np.bitwise_and(inside, planes.mask[box] == 255)
-    if not cv2.countNonZero(selected):
+    # (contiguous copies of the patches: one compiled signature whatever views they are)
+    patch = np.ascontiguousarray(planes.frame[box])
+    mask = np.ascontiguousarray(planes.mask[box])
+    (inside_count, inside_sums, selected_count, selected_sums,
+     chroma_sum) = disc_colour_sums(patch, mask, np.ascontiguousarray(planes.chroma[box]), inside)
+    if not selected_count:
         return NO_COLOUR
     # Averaging the unblurred disc recovers the hue that uint8 rounding hides in a very
     # dark frame (a dim orange box can round to yellow pixel by pixel). Grey floor or
     # black shade inside the disc does not move the hue of the mean.
-    mean_bgr = cv2.mean(planes.frame[box], inside)[:3]
-    chroma = cv2.mean(planes.chroma[box], selected)[0]
-    patch = planes.frame[box]
+    # (the means as cv2.mean makes them: the exact sums times the count's reciprocal)
+    mean_bgr = tuple(float(total) * (1.0 / inside_count) for total in inside_sums)
+    chroma = float(chroma_sum) * (1.0 / selected_count)
 
     def lit_colourfulness() -> float:
+        selected = np.bitwise_and(inside, mask == 255)
         return chroma / min(planes.reference, lit_level(patch, selected))
 
     return ColourMetrics(colourfulness=chroma / planes.reference,
                          mean_hue=mean_hue(mean_bgr),
                          mean_chroma=(max(mean_bgr) - min(mean_bgr)) / planes.gain,
-                         colour_hue=mean_hue(cv2.mean(patch, selected)[:3]),
+                         colour_hue=mean_hue(tuple(float(total) * (1.0 / selected_count)
+                                                   for total in selected_sums)),
                          lit_colourfulness=lit_colourfulness)
 
 

@@ -14,6 +14,7 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate, disc, rim_directions
 from balltrack.services.detector.mask import EXPLAINED, ColourMasker
 from balltrack.services.detector.measure import (EDGE_STEPS, INSIDE, NO_COLOUR, RING, area_counts, colour_stats,
+                                                 disc_colour_sums,
                                                  edge_spread, evenly_spaced, mean_hue, measure_mask, ray_edges,
                                                  rim_counts, rim_points, rim_samples)
 from tests.unit.detector.drawing import TENNIS_BGR, scene
@@ -187,3 +188,24 @@ def test_rim_counts_read_rim_points_pairs(x, y, radius, seed):
     expected = (len(known), sum(1 for inner, outer in known if inner and not outer), sum(leaking),
                 max(1, runs) if any(leaking) else 0)
     assert counts == expected
+
+
+@settings(max_examples=60, deadline=None)
+@given(patch=arrays(np.uint8, st.tuples(st.integers(1, 30), st.integers(1, 30), st.just(3))),
+       seed=st.integers(0, 2**32 - 1))
+def test_disc_colour_sums_make_cv2_means(patch, seed):
+    rng = np.random.default_rng(seed)
+    shape = patch.shape[:2]
+    inside = np.where(rng.random(shape) < 0.7, 255, 0).astype(np.uint8)
+    mask = rng.choice(np.array([0, 255, EXPLAINED], np.uint8), shape)
+    chroma = rng.integers(0, 256, shape, dtype=np.uint8)
+    inside_count, inside_sums, selected_count, selected_sums, chroma_sum = disc_colour_sums(
+        patch, mask, chroma, inside)
+    selected = np.bitwise_and(inside, np.where(mask == 255, 255, 0).astype(np.uint8))
+    assert (inside_count, selected_count) == (cv2.countNonZero(inside), cv2.countNonZero(selected))
+    # colour_stats' means: each sum times the count's reciprocal is cv2.mean to the bit
+    if inside_count:
+        assert [total * (1.0 / inside_count) for total in inside_sums] == list(cv2.mean(patch, inside)[:3])
+    if selected_count:
+        assert [total * (1.0 / selected_count) for total in selected_sums] == list(cv2.mean(patch, selected)[:3])
+        assert chroma_sum * (1.0 / selected_count) == cv2.mean(chroma, selected)[0]
