@@ -16,8 +16,9 @@ import math
 import cv2
 import numpy as np
 
-from balltrack.services.detector.fit import fit_circle, kasa
+from balltrack.services.detector.fit import kasa
 from balltrack.services.detector.geometry import Candidate
+from balltrack.services.detector.jit import compiled
 
 # A concave point cuts the outline when it lies at least ARC_CUT_DEPTH px (at processing size),
 # or ARC_CUT_SHARE of the blob's equivalent radius, inside the blob's convex hull: a ragged
@@ -139,25 +140,46 @@ def waist_pieces(points: np.ndarray, blob: np.ndarray) -> list[np.ndarray]:
     return [piece for piece in pieces if len(piece) >= ARC_MIN_POINTS]
 
 
+@compiled
+def arc_rounds(dx: np.ndarray, dy: np.ndarray, rounds: tuple, min_points: int,
+               tolerance: float) -> tuple[bool, float, float, float, np.ndarray]:
+    """``arc_circle``'s fit of points given about their mean: a Kasa circle through all, then a
+    round for each of ``rounds`` on the points within that share of the radius of the last
+    circle; (ok, x, y, radius, the points within ``tolerance`` of it). Not ok when a round keeps
+    fewer than ``min_points``, a fit fails, or the last circle holds fewer than that or than
+    half the points."""
+    near = np.ones(dx.size, np.bool_)
+    ok, x, y, radius = kasa(dx, dy, near)
+    if not ok:
+        return False, 0.0, 0.0, 0.0, near
+    for share in rounds:
+        count = 0
+        for index in range(dx.size):
+            near[index] = abs(np.hypot(dx[index] - x, dy[index] - y) - radius) <= max(1.0, share * radius)
+            count += near[index]
+        if count < min_points:
+            return False, 0.0, 0.0, 0.0, near
+        # (a round selects its points; a Kasa circle is the same from any origin)
+        ok, x, y, radius = kasa(dx, dy, near)
+        if not ok:
+            return False, 0.0, 0.0, 0.0, near
+    count = 0
+    for index in range(dx.size):
+        near[index] = abs(np.hypot(dx[index] - x, dy[index] - y) - radius) <= max(1.0, tolerance * radius)
+        count += near[index]
+    if count < max(min_points, 0.5 * dx.size):
+        return False, 0.0, 0.0, 0.0, near
+    return True, x, y, radius, near
+
+
 def arc_circle(piece: np.ndarray) -> tuple[float, float, float] | None:
     """The circle a piece of outline is a long even arc of, or None."""
     mean_x, mean_y = float(piece[:, 0].mean()), float(piece[:, 1].mean())
     dx, dy = piece[:, 0] - mean_x, piece[:, 1] - mean_y
-    fitted = fit_circle(dx, dy)
-    if fitted is None:
+    ok, x, y, radius, near = arc_rounds(dx, dy, ARC_ROUNDS, ARC_MIN_POINTS, ARC_TOLERANCE)
+    if not ok:
         return None
-    x, y, radius = fitted
-    for tolerance in ARC_ROUNDS:
-        near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, tolerance * radius)
-        if np.count_nonzero(near) < ARC_MIN_POINTS:
-            return None
-        # (a round selects its points; a Kasa circle is the same from any origin)
-        ok, x, y, radius = kasa(dx, dy, near)
-        if not ok:
-            return None
-    near = np.abs(np.hypot(dx - x, dy - y) - radius) <= max(1.0, ARC_TOLERANCE * radius)
-    if np.count_nonzero(near) < max(ARC_MIN_POINTS, 0.5 * len(piece)):
-        return None
+    # (numpy's arctan2, whose last bit the compiled one does not always match)
     angles = np.sort(np.arctan2(dy[near] - y, dx[near] - x))
     gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * math.pi]))
     if 2 * math.pi - float(gaps.max()) < ARC_MIN_SPAN:

@@ -71,14 +71,6 @@ def kasa(dx, dy, keep):
     return True, centre_x, centre_y, math.sqrt(radius_squared)
 
 
-def fit_circle(dx: np.ndarray, dy: np.ndarray) -> tuple[float, float, float] | None:
-    """Algebraic (Kasa) least-squares circle through points given relative to a point near
-    their centre: returns its centre (relative to the same point) and radius, or None."""
-    dx, dy = np.asarray(dx, np.float64), np.asarray(dy, np.float64)
-    ok, centre_x, centre_y, radius = kasa(dx, dy, np.ones(dx.size, np.bool_))
-    return (centre_x, centre_y, radius) if ok else None
-
-
 @compiled
 def geometric_steps(px, py, keep, x, y, radius, iterations):
     """Gauss-Newton refinement of a circle on the geometric distances to it of the points

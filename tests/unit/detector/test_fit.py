@@ -8,8 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from balltrack.services.detector.fit import (fit_circle, geometric_steps, kasa, refine_on_boundary,
-                                             robust_circle)
+from balltrack.services.detector.fit import geometric_steps, kasa, refine_on_boundary, robust_circle
 from balltrack.services.detector.geometry import Candidate, disc
 from balltrack.services.detector.proposals import boundary_points
 
@@ -17,6 +16,13 @@ from balltrack.services.detector.proposals import boundary_points
 def circle_points(x, y, radius, count=60, start=0.0, stop=2 * math.pi):
     angles = np.linspace(start, stop, count, endpoint=False)
     return x + radius * np.cos(angles), y + radius * np.sin(angles)
+
+
+def fit_circle(px, py):
+    """The Kasa circle through every point: (x, y, radius), or None."""
+    px, py = np.asarray(px, np.float64), np.asarray(py, np.float64)
+    ok, centre_x, centre_y, radius = kasa(px, py, np.ones(px.size, np.bool_))
+    return (centre_x, centre_y, radius) if ok else None
 
 
 def test_fit_circle_is_exact_on_exact_points():
