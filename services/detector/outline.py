@@ -285,7 +285,9 @@ def silhouette(frame: np.ndarray, mask: np.ndarray, gain: float, reference: floa
         return None
     left, top = box[1].start, box[0].start
     patch = frame[box].astype(np.float32)
-    patch_mask = mask[box]
+    # (contiguous: one compiled signature of outline_round, whether or not the box spans the
+    # frame's width, so no frame waits for the compiler; see detector.compile_kernels)
+    patch_mask = np.ascontiguousarray(mask[box])
     # The ball's colour: the mean of its lit, colour-mask part.
     # (a boolean AND: OpenCV's per-call overhead exceeds the work on a patch this small)
     lit = disc(patch_mask.shape, x0 - left, y0 - top, 0.85 * r0)

@@ -85,6 +85,8 @@ def test_compile_kernels_compiles_what_frames_need():
               scene([(300.0, 240.0, 40.0), (372.0, 240.0, 32.0)]),    # touching
               scene([(10.0, 200.0, 35.0)], seed=3),                   # cut by the frame's edge
               scene([(320.0, 240.0, 20.0)], brightness=0.05),         # dark
+              # (its outline's search spans the frame's width: a contiguous slice of its mask)
+              scene([(80.0, 240.0, 40.0)], width=160),
               pitch_dark_frame(balls=[(320.0, 300.0, 25.0)])]
     for frame in frames:
         detector.detect(frame)
