@@ -341,13 +341,19 @@ def without_contained(measured: list[Measured]) -> list[Measured]:
 
 def compile_kernels() -> float:
     """Compile the detector's compiled functions (see ``jit.py``), or load them from numba's
-    cache, by detecting balls in a drawn frame: one ball alone and two touching take every
-    compiled path a frame takes. Returns the seconds it took (10-40 s compiling, ~0.3 s from
+    cache, by detecting balls in two drawn frames: one ball alone and two touching, and a dark
+    frame with a lamp (brightened up to white) take every compiled path a frame takes. Returns the seconds it took (10-40 s compiling, ~0.3 s from
     the cache on this project's 2-core machines). A service calls it before its first frame
     and ``deploy/setup.sh`` once per install, so that no frame waits for the compiler."""
     started = time.perf_counter()
     frame = np.full((240, 320, 3), (70, 80, 90), np.uint8)
     for centre, radius in (((150, 120), 30), ((235, 130), 18), ((262, 130), 18)):
         cv2.circle(frame, centre, radius, (40, 200, 180), -1, cv2.LINE_AA)
-    BallDetector().detect(frame)
+    # and a dark one with a lamp in it, brightened with the lamp's pixels kept short of white
+    dark = np.full((240, 320, 3), (4, 5, 6), np.uint8)
+    cv2.circle(dark, (60, 60), 8, (200, 210, 220), -1)
+    cv2.circle(dark, (200, 150), 25, (3, 14, 12), -1, cv2.LINE_AA)
+    detector = BallDetector()
+    for image in (frame, dark):
+        detector.detect(image)
     return time.perf_counter() - started

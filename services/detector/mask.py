@@ -28,6 +28,7 @@ import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import brightest_channel
+from balltrack.services.detector.jit import compiled
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
                                                  doubled_part, grown_box, half_value, regions_apply,
@@ -122,13 +123,28 @@ def brighten(image_bgr: np.ndarray, gain: float, small: np.ndarray) -> np.ndarra
     gained = cv2.convertScaleAbs(image_bgr, alpha=gain)
     if float(small.max()) * gain <= 255.0:
         return gained
-    value = brightest_channel(image_bgr)
-    rows, columns = np.nonzero(value > 255.0 / gain)
-    if rows.size:
-        pixels = image_bgr[rows, columns].astype(np.float32)
-        scale = 255.0 / value[rows, columns].astype(np.float32)
-        gained[rows, columns] = np.rint(pixels * scale[:, None]).astype(np.uint8)
+    # (contiguous, as ``gained`` is: one compiled signature whatever the caller's frame is)
+    scale_to_white(np.ascontiguousarray(image_bgr), gained, 255.0 / gain)
     return gained
+
+
+@compiled
+def scale_to_white(image_bgr: np.ndarray, gained: np.ndarray, limit: float) -> None:
+    """``brighten``'s clipping pixels, in place in ``gained``: each pixel of ``image_bgr``
+    whose brightest channel is above ``limit`` scaled (in float32) until that channel is 255.
+    (Numpy's indexing of those pixels took ~4 ms on a dark 640x480 photo with a bright sky.)"""
+    white = np.float32(255.0)
+    for row in range(image_bgr.shape[0]):
+        for column in range(image_bgr.shape[1]):
+            blue = image_bgr[row, column, 0]
+            green = image_bgr[row, column, 1]
+            red = image_bgr[row, column, 2]
+            value = max(blue, green, red)
+            if value > limit:
+                scale = white / np.float32(value)
+                gained[row, column, 0] = np.uint8(np.rint(np.float32(blue) * scale))
+                gained[row, column, 1] = np.uint8(np.rint(np.float32(green) * scale))
+                gained[row, column, 2] = np.uint8(np.rint(np.float32(red) * scale))
 
 
 def frame_gain(reference: float, config: DetectorConfig) -> float:

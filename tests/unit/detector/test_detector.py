@@ -9,8 +9,10 @@ balls whose unlit side is black. Every found ball must be within 0.5 px (centre)
 """
 
 import dataclasses
+import importlib
 import json
 import math
+import pkgutil
 import time
 from pathlib import Path
 
@@ -24,7 +26,7 @@ from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.checks import CandidateMetrics
 from balltrack.services.detector.measure import NO_COLOUR, MaskMetrics
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector import edges, fit, outline
+from balltrack.services import detector as detector_package
 from balltrack.services.detector.detector import (STAGES, BallDetector, Detection, DetectionResult,
                                                   acceptance_order, compile_kernels, without_contained)
 from balltrack.services.detector.geometry import Candidate
@@ -70,8 +72,11 @@ def test_finds_a_ball_filling_much_of_the_frame(detector):
 def compiled_signatures() -> dict[str, set[str]]:
     """Every compiled function of the detector (see jit.py) and the argument types it has been
     compiled for."""
+    modules = [importlib.import_module(f"{detector_package.__name__}.{module.name}")
+               for module in pkgutil.iter_modules(detector_package.__path__)
+               if module.name not in ("__main__", "service")]  # (the core's modules only)
     return {f"{module.__name__}.{name}": set(map(str, function.signatures))
-            for module in (edges, fit, outline) for name, function in vars(module).items()
+            for module in modules for name, function in vars(module).items()
             if hasattr(function, "signatures") and function.__module__ == module.__name__}
 
 

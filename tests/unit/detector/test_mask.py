@@ -5,6 +5,8 @@ import math
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.mask import (ColourMasker, brighten, check_image, ellipse_kernel, hue_mask,
@@ -126,6 +128,23 @@ def test_brighten_scales_clipping_pixels_only_up_to_white():
     assert tuple(gained[5, 30]) == (159, 255, 228)
     # nothing clips: the plain scaling
     assert (brighten(image[:, :20], 3.0, quarter_sample(image[:, :20])) == image[:, :20] * 3).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), gain=st.floats(1.01, 64.0))
+def test_brighten_scales_every_clipping_pixel_as_its_float32_ratio_to_white(seed, gain):
+    # a frame of every brightness (a view of a wider one, as a caller's frame may be)
+    wide = (np.random.default_rng(seed).random((30, 50, 3)) ** 2 * 255).astype(np.uint8)
+    image = wide[:, 5:45]
+    gained = brighten(image, gain, quarter_sample(image))
+    expected = cv2.convertScaleAbs(image, alpha=gain)
+    value = image.max(axis=2)
+    clipping = value > 255.0 / gain
+    ratio = np.float32(255.0) / value[clipping].astype(np.float32)
+    expected[clipping] = np.rint(image[clipping].astype(np.float32) * ratio[:, None]).astype(np.uint8)
+    if float(quarter_sample(image).max()) * gain <= 255.0:
+        expected = cv2.convertScaleAbs(image, alpha=gain)  # (the sample says nothing clips)
+    assert np.array_equal(gained, expected)
 
 
 def test_a_bright_ball_in_a_dark_frame_keeps_its_colour():
