@@ -3,7 +3,14 @@
 Used where a stage's time was numpy's overhead per call, not the work: the outline search and
 the circle fits run dozens of small array operations per ball on a few dozen to a few hundred
 values (a ball's outline took ~1.4 ms in ~150 numpy calls on a 2-core machine; compiled
-loops do the same in a few tens of microseconds).
+loops do the same in a few tens of microseconds); a candidate's measurements read its rim,
+disc and ring in one pass each instead of a dozen calls; and a dark frame's clipping pixels
+are scaled one by one instead of through numpy's indexing of a large share of the frame.
+
+Each replaces numpy or OpenCV calls to the bit: integer counts and sums, the same float32 or
+float64 operations in the same order (numpy's reductions, whose summation order a loop would
+not follow, stay in numpy). Arrays are passed contiguous, so that each function has one
+compiled signature that ``compile_kernels`` makes before the first frame.
 
 Compiled code is cached on disk beside the sources (``__pycache__``; numba falls back to a
 per-user cache when that is not writable). Compiling all of them takes 10-40 s on this project's
