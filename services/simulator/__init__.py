@@ -2,7 +2,8 @@
 
 A small planar-base robot with a low forward camera, tennis balls (some scripted to move),
 distractors and a settable main light. The pure core is :mod:`services.simulator.sim`
-(``Simulation``); scenes are TOML files in ``services/simulator/scenarios/``.
+(``Simulation``), its camera :mod:`services.simulator.sim_camera`; scenes are TOML files in
+``services/simulator/scenarios/``.
 
 Example::
 

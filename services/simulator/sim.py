@@ -52,12 +52,11 @@ from balltrack.services.simulator.requests import (  # noqa: E402
     robot_position,
 )
 from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
+from balltrack.services.simulator.sim_camera import SimCamera, camera_info, project  # noqa: E402
 from balltrack.services.simulator.world import (  # noqa: E402
-    CAMERA_NAME,
     LIGHT_NAME,
     ROBOT_JOINTS,
     SPECULAR_PER_DIFFUSE,
-    VIEW_NAMES,
     ball_body_name,
     build_mjcf,
     light_levels,
@@ -67,23 +66,6 @@ from balltrack.services.simulator.world import (  # noqa: E402
 # Commands beyond these are not "fast", they are broken (wrong units, garbage): rejected.
 ABSURD_LINEAR = 100.0
 ABSURD_ANGULAR = 100.0
-# A ball this close to the camera plane (m) counts as not in front of it.
-MIN_VISIBLE_DEPTH = 1e-3
-
-
-def _release_gl_context() -> None:
-    """Unbind the calling thread's EGL context, so that the next render may come from any thread.
-
-    An EGL context can be current in one thread only; mujoco.Renderer makes its context
-    current on creation and on each render but never releases it.
-    """
-    if os.environ.get("MUJOCO_GL", "").lower() != "egl":
-        return
-    from mujoco import egl
-
-    if egl.EGL_DISPLAY is not None:
-        egl.EGL.eglMakeCurrent(egl.EGL_DISPLAY, egl.EGL.EGL_NO_SURFACE, egl.EGL.EGL_NO_SURFACE,
-                               egl.EGL.EGL_NO_CONTEXT)
 
 
 def _locked(method):
@@ -102,7 +84,7 @@ class Simulation:
         self.config = config
         self._lock = threading.RLock()
         self._model: mujoco.MjModel | None = None
-        self._renderer: mujoco.Renderer | None = None
+        self._camera: SimCamera | None = None
         self._frame_index = 0
         self.wall_time: float | None = None
         self.command_count = 0
@@ -116,17 +98,15 @@ class Simulation:
         config = self.config
         model = mujoco.MjModel.from_xml_string(build_mjcf(scenario, config))
         data = mujoco.MjData(model)
-        renderer = mujoco.Renderer(model, config.height, config.width)
-        _release_gl_context()
-        if self._renderer is not None:
-            self._renderer.close()
+        camera = SimCamera(model, data, config)
+        if self._camera is not None:
+            self._camera.close()
         self.scenario = scenario
         self._model = model
         self._data = data
-        self._renderer = renderer
+        self._camera = camera
         self._data.time = start_time
         self._substeps = physics_substeps(config)
-        self._camera_id = model.camera(CAMERA_NAME).id
         self._light_id = model.light(LIGHT_NAME).id
         self._qpos_index = [int(model.joint(name).qposadr[0]) for name in ROBOT_JOINTS]
         self._qvel_index = [int(model.joint(name).dofadr[0]) for name in ROBOT_JOINTS]
@@ -161,9 +141,7 @@ class Simulation:
     @_locked
     def close(self) -> None:
         """Free the renderer (and its OpenGL context). Safe to call twice."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._camera.close()
 
     def __enter__(self) -> "Simulation":
         return self
@@ -287,81 +265,32 @@ class Simulation:
 
     def camera_info(self) -> dict[str, Any]:
         """Pinhole intrinsics of the rendered images (OpenCV pixel convention, see module doc)."""
-        width, height = self.config.width, self.config.height
-        focal = (width / 2) / math.tan(self.config.hfov / 2)
-        return {
-            "width": width,
-            "height": height,
-            "fx": focal,
-            "fy": focal,
-            "cx": (width - 1) / 2,
-            "cy": (height - 1) / 2,
-            "hfov": self.config.hfov,
-            "vfov": self.config.vfov,
-        }
+        return camera_info(self.config)
 
     @_locked
     def render(self) -> np.ndarray:
         """The camera image now: H x W x 3 uint8, RGB (plus seeded noise if image_noise > 0)."""
-        renderer = self._live_renderer()
-        renderer.update_scene(self._data, self._camera_id)
-        try:
-            image = renderer.render()
-        finally:
-            _release_gl_context()
-        if self.config.image_noise > 0:
-            noise = self._rng.normal(0.0, self.config.image_noise, image.shape)
-            image = np.clip(image + noise, 0, 255).astype(np.uint8)
-        return image
+        return self._camera.render(self._rng)
 
     @_locked
     def render_view(self, view: str = "follow") -> np.ndarray:
         """An RGB picture for people: "follow" (behind the robot), "top" (the whole world from
         above) or "front" (the robot's camera, without noise); same size as the camera image."""
-        if view not in VIEW_NAMES:
-            raise ValueError(f"view: must be one of {', '.join(VIEW_NAMES)}, got {view!r}")
-        renderer = self._live_renderer()
-        renderer.update_scene(self._data, self._model.camera(view).id)
-        try:
-            return renderer.render()
-        finally:
-            _release_gl_context()
+        return self._camera.render_view(view)
 
     @_locked
     def ball_masks(self) -> dict[str, np.ndarray]:
         """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
-        renderer = self._live_renderer()
-        renderer.enable_segmentation_rendering()
-        try:
-            renderer.update_scene(self._data, self._camera_id)
-            segmentation = renderer.render()
-        finally:
-            renderer.disable_segmentation_rendering()
-            _release_gl_context()
-        is_geom = segmentation[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
-        return {ball.id: is_geom & (segmentation[..., 0] == geom_id)
-                for ball, geom_id in zip(self.scenario.balls, self._ball_geoms)}
-
-    def _live_renderer(self) -> mujoco.Renderer:
-        if self._renderer is None:
-            raise RuntimeError("the simulation is closed")
-        return self._renderer
+        return self._camera.ball_masks([ball.id for ball in self.scenario.balls], self._ball_geoms)
 
     @_locked
     def world_to_camera(self, point) -> np.ndarray:
         """A world point in the camera optical frame (x right, y down, z forward)."""
-        rotation = self._data.cam_xmat[self._camera_id].reshape(3, 3)
-        local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[self._camera_id])
-        # MuJoCo cameras look along -z with y up; the optical frame looks along +z with y down.
-        return np.array([local[0], -local[1], -local[2]])
+        return self._camera.world_to_camera(point)
 
     def project(self, point_in_camera) -> tuple[float, float] | None:
         """Pixel (u, v) of an optical-frame point, or None when it is not in front."""
-        x, y, z = point_in_camera
-        if z <= MIN_VISIBLE_DEPTH:
-            return None
-        info = self.camera_info()
-        return info["cx"] + info["fx"] * x / z, info["cy"] + info["fy"] * y / z
+        return project(self.config, point_in_camera)
 
     # -- ground truth -------------------------------------------------------------------------
 

@@ -1,0 +1,131 @@
+"""The robot's camera in the simulated world (part of the simulator's pure core, see ``sim.py``):
+its MuJoCo renderer and OpenGL context, the pictures it takes (the camera image, views for
+people, the balls' segmentation), its pinhole model and the projection of points into it.
+
+``Simulation`` holds one per world and takes its lock around every call; the OpenGL (EGL)
+context is released after each render, so the next may come from any thread.
+"""
+
+import math
+import os
+from typing import Any
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # (as sim.py: before mujoco is imported)
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
+from balltrack.services.simulator.world import CAMERA_NAME, VIEW_NAMES  # noqa: E402
+
+# A ball this close to the camera plane (m) counts as not in front of it.
+MIN_VISIBLE_DEPTH = 1e-3
+
+
+def release_gl_context() -> None:
+    """Unbind the calling thread's EGL context, so that the next render may come from any thread.
+
+    An EGL context can be current in one thread only; mujoco.Renderer makes its context
+    current on creation and on each render but never releases it.
+    """
+    if os.environ.get("MUJOCO_GL", "").lower() != "egl":
+        return
+    from mujoco import egl
+
+    if egl.EGL_DISPLAY is not None:
+        egl.EGL.eglMakeCurrent(egl.EGL_DISPLAY, egl.EGL.EGL_NO_SURFACE, egl.EGL.EGL_NO_SURFACE,
+                               egl.EGL.EGL_NO_CONTEXT)
+
+
+def camera_info(config: SimulatorConfig) -> dict[str, Any]:
+    """Pinhole intrinsics of the rendered images (OpenCV pixel convention, see ``sim.py``)."""
+    width, height = config.width, config.height
+    focal = (width / 2) / math.tan(config.hfov / 2)
+    return {
+        "width": width,
+        "height": height,
+        "fx": focal,
+        "fy": focal,
+        "cx": (width - 1) / 2,
+        "cy": (height - 1) / 2,
+        "hfov": config.hfov,
+        "vfov": config.vfov,
+    }
+
+
+def project(config: SimulatorConfig, point_in_camera) -> tuple[float, float] | None:
+    """Pixel (u, v) of an optical-frame point, or None when it is not in front."""
+    x, y, z = point_in_camera
+    if z <= MIN_VISIBLE_DEPTH:
+        return None
+    info = camera_info(config)
+    return info["cx"] + info["fx"] * x / z, info["cy"] + info["fy"] * y / z
+
+
+class SimCamera:
+    """The robot's camera on one MuJoCo model and its data (see the module doc)."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, config: SimulatorConfig):
+        self._renderer: mujoco.Renderer | None = mujoco.Renderer(model, config.height, config.width)
+        release_gl_context()
+        self._model = model
+        self._data = data
+        self._config = config
+        self._camera_id = model.camera(CAMERA_NAME).id
+
+    def close(self) -> None:
+        """Free the renderer (and its OpenGL context). Safe to call twice; points can still
+        be projected afterwards."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def render(self, rng: np.random.Generator) -> np.ndarray:
+        """The camera image now: H x W x 3 uint8, RGB (plus noise from ``rng`` if image_noise > 0)."""
+        renderer = self._live_renderer()
+        renderer.update_scene(self._data, self._camera_id)
+        try:
+            image = renderer.render()
+        finally:
+            release_gl_context()
+        if self._config.image_noise > 0:
+            noise = rng.normal(0.0, self._config.image_noise, image.shape)
+            image = np.clip(image + noise, 0, 255).astype(np.uint8)
+        return image
+
+    def render_view(self, view: str) -> np.ndarray:
+        """An RGB picture for people from one of VIEW_NAMES' cameras."""
+        if view not in VIEW_NAMES:
+            raise ValueError(f"view: must be one of {', '.join(VIEW_NAMES)}, got {view!r}")
+        renderer = self._live_renderer()
+        renderer.update_scene(self._data, self._model.camera(view).id)
+        try:
+            return renderer.render()
+        finally:
+            release_gl_context()
+
+    def ball_masks(self, ball_ids: list[str], ball_geoms: list[int]) -> dict[str, np.ndarray]:
+        """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
+        renderer = self._live_renderer()
+        renderer.enable_segmentation_rendering()
+        try:
+            renderer.update_scene(self._data, self._camera_id)
+            segmentation = renderer.render()
+        finally:
+            renderer.disable_segmentation_rendering()
+            release_gl_context()
+        is_geom = segmentation[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
+        return {ball_id: is_geom & (segmentation[..., 0] == geom_id)
+                for ball_id, geom_id in zip(ball_ids, ball_geoms)}
+
+    def world_to_camera(self, point) -> np.ndarray:
+        """A world point in the camera optical frame (x right, y down, z forward)."""
+        rotation = self._data.cam_xmat[self._camera_id].reshape(3, 3)
+        local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[self._camera_id])
+        # MuJoCo cameras look along -z with y up; the optical frame looks along +z with y down.
+        return np.array([local[0], -local[1], -local[2]])
+
+    def _live_renderer(self) -> mujoco.Renderer:
+        if self._renderer is None:
+            raise RuntimeError("the simulation is closed")
+        return self._renderer
