@@ -25,7 +25,6 @@ subscriber: three subscribers, the default here.
 import argparse
 import io
 import json
-import os
 import signal
 import statistics
 import subprocess
@@ -38,6 +37,7 @@ from pathlib import Path
 from balltrack.common.arguments import integer, number
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.session import ArgumentParser, client_config
+from balltrack.common.terminal import print_lines
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
 
@@ -247,10 +247,7 @@ def main(argv: list[str] | None = None) -> int:
              "| payload | shared memory | arrived | p50 (ms) | p90 (ms) | p50 per subscriber (ms) "
              "| came as shared memory |",
              "| --- | --- | --- | --- | --- | --- | --- |", *(row(result) for result in results)]
-    try:
-        print("\n".join(lines), flush=True)
-    except BrokenPipeError:  # the reader went away (`| head`): a normal end, and a quiet one
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    print_lines(lines)  # (quietly, when the reader has gone: `| head`)
     return 0
 
 

@@ -22,12 +22,13 @@
 import argparse
 import sys
 
-from balltrack.cli import (calibrate, config, introspect, network, offline, output, publish, recording, run,
+from balltrack.cli import (calibrate, config, introspect, network, offline, publish, recording, run,
                            topics)
 from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.common.keys import Keys
 from balltrack.common.session import ArgumentParser
+from balltrack.common.terminal import silence_closed_stdout
 
 
 def _experiment(arguments: list[str]) -> int:
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.handler(args)
     except BrokenPipeError:  # the reader of our output went away (`| head`): a normal end
-        output.silence_closed_stdout()
+        silence_closed_stdout()
         return 0
 
 

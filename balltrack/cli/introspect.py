@@ -11,7 +11,8 @@ import threading
 import time
 from collections import defaultdict
 
-from balltrack.cli.output import Output, silence_closed_stdout
+from balltrack.cli.output import Output
+from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys

@@ -2,10 +2,10 @@
 
 When the reader goes away, writing raises BrokenPipeError. The command should then stop as if
 asked to (its stop event is set), close its session, and exit 0 without a traceback: Python
-would otherwise report the error again when it flushes stdout at exit.
+would otherwise report the error again when it flushes stdout at exit
+(``common.terminal.silence_closed_stdout``).
 """
 
-import os
 import sys
 import threading
 
@@ -32,12 +32,3 @@ class Output:
                 self.closed = True
                 self.stop.set()
                 return False
-
-
-def silence_closed_stdout() -> None:
-    """After a BrokenPipeError, point stdout at /dev/null so the exit-time flush is quiet."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
-        pass

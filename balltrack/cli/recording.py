@@ -16,7 +16,8 @@ import threading
 import time
 from datetime import datetime, timezone
 
-from balltrack.cli.output import Output, silence_closed_stdout
+from balltrack.cli.output import Output
+from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
