@@ -40,15 +40,16 @@ SHOWN_DIFFERENCES = 5
 
 def frames_of(sources: dict) -> list[tuple[str, np.ndarray]]:
     """(name, BGR frame) of every frame the sources give, in a fixed order."""
-    from balltrack.experiments.detector_speed import photo_frames, photo_paths, simulator_frames
+    from balltrack.experiments.detector_speed import named_photo_frames, simulator_frames
 
     frames = []
     if sources.get("photos"):
         folder = Path(sources["photos"])
         if not folder.is_dir():
             raise OSError(f"{folder}: no such folder of photos")
-        names = [path.relative_to(folder).as_posix() for path in photo_paths(folder)]
-        frames.extend(zip((f"photo {name}" for name in names), photo_frames(folder)))
+        # (named by their own paths: an unreadable file is left out, not shifting the names)
+        frames.extend((f"photo {path.relative_to(folder).as_posix()}", frame)
+                      for path, frame in named_photo_frames(folder))
     if sources.get("recording"):
         frames.extend(recording_frames(Path(sources["recording"]), sources["every"]))
     if sources.get("renders"):

@@ -92,10 +92,15 @@ def photo_paths(folder: Path) -> list[Path]:
     return sorted(path for pattern in ("*.jpg", "*.png") for path in folder.rglob(pattern))
 
 
+def named_photo_frames(folder: Path) -> list[tuple[Path, np.ndarray]]:
+    """Each readable photo under ``folder`` (see photo_paths) with its path, resized to 640x480."""
+    images = [(path, cv2.imread(str(path))) for path in photo_paths(folder)]
+    return [(path, cv2.resize(image, (640, 480), interpolation=cv2.INTER_AREA))
+            for path, image in images if image is not None]
+
+
 def photo_frames(folder: Path) -> list[np.ndarray]:
-    images = [cv2.imread(str(path)) for path in photo_paths(folder)]
-    return [cv2.resize(image, (640, 480), interpolation=cv2.INTER_AREA)
-            for image in images if image is not None]
+    return [frame for _, frame in named_photo_frames(folder)]
 
 
 def figures(wall: list[float], cpu: list[float]) -> dict[str, float]:

@@ -39,3 +39,14 @@ def test_record_without_frames_is_refused():
     with pytest.raises(SystemExit) as exited:
         detector_outputs.main(["record", "outputs.json"])
     assert exited.value.code == 2
+
+
+def test_photos_are_named_by_their_own_files_when_one_cannot_be_read(tmp_path):
+    import cv2
+    import numpy as np
+
+    (tmp_path / "a.png").write_bytes(b"not an image")
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((48, 64, 3), 90, np.uint8))
+    frames = detector_outputs.frames_of({"photos": str(tmp_path)})
+    assert [name for name, _ in frames] == ["photo b.png"]
+    assert frames[0][1].shape == (480, 640, 3)
