@@ -22,6 +22,7 @@ Example::
 
 import argparse
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -121,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="use every this many frames of the recording (default 1)")
     parser.add_argument("--renders", type=integer(minimum=0), default=0, help="simulator renders (default 0)")
     args = parser.parse_args(argv)
+    # SIGTERM ends a run as Ctrl-C does: one line, status 1, nothing written
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         if args.action == "record":
             sources = {"photos": args.photos, "recording": args.recording, "every": args.every,
@@ -148,8 +151,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"detector_outputs: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("detector_outputs: interrupted", file=sys.stderr)
+        print("detector_outputs: stopped by a signal", file=sys.stderr)
         return 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     print_lines(report)  # (quietly, when the reader has gone: `| head`)
     return status
 

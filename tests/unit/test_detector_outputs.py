@@ -50,3 +50,17 @@ def test_photos_are_named_by_their_own_files_when_one_cannot_be_read(tmp_path):
     frames = detector_outputs.frames_of({"photos": str(tmp_path)})
     assert [name for name, _ in frames] == ["photo b.png"]
     assert frames[0][1].shape == (480, 640, 3)
+
+
+def test_sigterm_stops_a_run_with_one_line(tmp_path):
+    import signal
+    import sys
+
+    from tests.harness import Process
+
+    run = Process([sys.executable, "-m", "balltrack.experiments.detector_outputs", "record",
+                   str(tmp_path / "outputs.json"), "--renders", "3000"], tmp_path / "run.log")
+    run.wait_for_signal_handler(signal.SIGTERM, timeout=60)
+    assert run.stop() == 1
+    assert run.output() == "detector_outputs: stopped by a signal\n"
+    assert not (tmp_path / "outputs.json").exists()
