@@ -295,16 +295,20 @@ def encode(name: str, message: dict) -> bytes:
 
 def _check_depth(message: Any, limit: int = MAX_DEPTH) -> None:
     """Refuse values nested deeper than ``limit``: no contract message goes past 4 levels, and
-    msgpack packs only 511 (it unpacks 1,024), so a deeper value could not be passed on."""
+    msgpack packs only 511 (it unpacks 1,024), so a deeper value could not be passed on.
+    (Comprehensions with exact type tests: the generator version took 19 us of a Ball2D's
+    48 us decode on this machine, 11 us this way; msgpack gives only these container types,
+    its maps' array keys as tuples.)"""
     level = [message]
     for _ in range(limit + 1):
         deeper = []
         for value in level:
-            if isinstance(value, dict):
-                deeper.extend(item for item in value.values() if isinstance(item, (dict, list)))
-                deeper.extend(item for item in value if isinstance(item, tuple))
-            elif isinstance(value, (list, tuple)):
-                deeper.extend(item for item in value if isinstance(item, (dict, list, tuple)))
+            if type(value) is dict:
+                deeper += [item for item in value.values() if type(item) is dict or type(item) is list]
+                deeper += [key for key in value if type(key) is tuple]
+            elif type(value) is list or type(value) is tuple:
+                deeper += [item for item in value
+                           if type(item) is dict or type(item) is list or type(item) is tuple]
         if not deeper:
             return
         level = deeper

@@ -193,8 +193,9 @@ class ServiceContext:
             self.stats.record_duration(time.perf_counter() - started)
 
     def subscribe(self, key: str, message_name: str, handler: Callable[[dict], None],
-                  count: bool = True) -> None:
-        """Decode each sample on ``key`` as ``message_name`` and call ``handler`` in order."""
+                  count: bool = True):
+        """Decode each sample on ``key`` as ``message_name`` and call ``handler`` in order;
+        returns the subscriber, for ``unsubscribe``."""
         full_key = self.keys(key)
 
         def on_sample(sample):
@@ -202,7 +203,14 @@ class ServiceContext:
                 self.stats.count("received")
             self.process(full_key, message_name, sample.payload.to_bytes(), handler, count)
 
-        self._declared.append(self.session.declare_subscriber(full_key, in_order(on_sample)))
+        subscriber = self.session.declare_subscriber(full_key, in_order(on_sample))
+        self._declared.append(subscriber)
+        return subscriber
+
+    def unsubscribe(self, subscriber) -> None:
+        """Undeclare a subscriber that ``subscribe`` returned."""
+        self._declared.remove(subscriber)
+        subscriber.undeclare()
 
     def subscribe_latest(self, key: str, message_name: str, handler: Callable[[dict], None]) -> None:
         """Like ``subscribe`` but a worker thread serves only the newest sample: under

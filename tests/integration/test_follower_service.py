@@ -3,7 +3,7 @@
 import pytest
 
 from balltrack.common.messages import encode, header
-from tests.harness import Collector, garbage_payloads, query_config
+from tests.harness import Collector, garbage_payloads, put_until, query_config
 
 
 def detection(x, z, seq):
@@ -135,3 +135,30 @@ def test_command_on_detection_answers_every_frame_at_once(session, start_followe
     ticks = commands.wait_for(lambda m: [c for c in m if "time" in c and c["mode"] == "search"
                                          and c["header"]["seq"] == 10], 10, "search after the frames stop")
     assert ticks[-1]["angular"][2] == pytest.approx(-0.5)
+
+
+def test_switching_keep_target_live_follows_the_other_key(session, start_follower):
+    # Only the key in use is subscribed: the switch must declare the other one.
+    start_follower("command_on_detection=true", "rate_hz=1")
+    commands = Collector(session, "cmd_vel", "Twist")
+
+    def answered(seq):
+        return lambda messages: [c for c in messages if "time" not in c and c["header"]["seq"] == seq]
+
+    put_until(lambda _: session.put("detected_ball", encode("Ball2D", detection(0.4, 0.05, 1))),
+              commands, answered(1), 10, 0.5, "a command for detected_ball")
+    assert query_config(session, "follower", {"keep_target": True})["ok"]
+    sent = iter(range(2, 1000))
+
+    def put_frame(_):
+        seq = next(sent)
+        session.put("detected_ball", encode("Ball2D", detection(0.4, 0.05, seq)))
+        session.put("detected_balls", encode("Ball2DArray", {"header": header(seq * 1000, seq), "balls": [
+            {key: value for key, value in detection(0.4, 0.05, seq).items() if key != "header"}]}))
+
+    put_until(put_frame, commands, lambda messages: [c for c in messages if "time" not in c
+                                                     and c["header"]["seq"] >= 2], 10, 0.5,
+              "a command for detected_balls after the switch")
+    assert query_config(session, "follower", {"keep_target": False})["ok"]
+    put_until(lambda _: session.put("detected_ball", encode("Ball2D", detection(0.4, 0.05, 2000))),
+              commands, answered(2000), 10, 0.5, "a command for detected_ball after switching back")

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.messages import (
-    HEADER_FIELDS, MAX_FRAME_ID, SCHEMAS, MessageError, decode, encode, header, shorten,
+    HEADER_FIELDS, MAX_DEPTH, MAX_FRAME_ID, SCHEMAS, MessageError, decode, encode, header, shorten,
 )
 
 PROPERTY_SETTINGS = settings(max_examples=200, deadline=None,
@@ -251,3 +251,30 @@ def test_a_peers_map_key_in_an_error_stays_on_one_line():
         decode("ConfigReply", payload)
     assert "\n" not in str(raised.value) and len(str(raised.value)) < 1000
     assert str(raised.value).startswith("parameters.\\nxxx")
+
+
+@pytest.mark.parametrize("container", ["list", "map"])
+def test_nesting_is_refused_just_past_the_limit(container):
+    def nested(depth):
+        """A value whose containers go ``depth`` levels deep."""
+        value = 0
+        for _ in range(depth):
+            value = [value] if container == "list" else {"k": value}
+        return value
+
+    def reason(depth):
+        # (the scenario field is refused by the schema, but only after the depth check)
+        try:
+            decode("SimCommand", pack({"op": "reset", "scenario": nested(depth)}))
+        except MessageError as error:
+            return str(error)
+        return "accepted"
+
+    assert "nested deeper" not in reason(MAX_DEPTH)
+    assert "nested deeper" in reason(MAX_DEPTH + 1)
+
+
+def test_a_payload_that_is_no_map_is_refused():
+    for scalar in (5, "text", None, 1.5, b"bytes", [1, [2]]):
+        with pytest.raises(MessageError, match="expected a map"):
+            decode("SimCommand", pack(scalar))
