@@ -1,8 +1,8 @@
 """Reaction time in the demo: frame -> ``detected_ball_3d`` and frame -> ``cmd_vel``.
 
 Runs the demo (``deploy/demo.py``: router, simulator in real time at 30 Hz, detector, locator,
-follower and ``balltrack record`` writing ``run.mcap``, each its own process) once per follower
-mode and reads the latencies it measured, by wall-clock arrival at its subscriber of a
+follower and ``balltrack record`` writing ``run.mcap``, each its own process) in each follower
+mode (the goals' mode three times, judged on the median run) and reads the latencies it measured, by wall-clock arrival at its subscriber of a
 frame and of what was derived from it (same ``seq``):
 
 * ``event``: the follower commands on each detection (``command_on_detection=true``, issue 9's
@@ -30,6 +30,8 @@ GOAL_BALL_P50_MS = 4.0
 GOAL_BALL_P99_MS = 12.0
 GOAL_COMMAND_P50_MS = 5.0
 MODES = {"event": ["--set", "follower.command_on_detection=true"], "timer": []}
+# Demos in event mode in a full run (one with --quick).
+EVENT_RUNS = 3
 
 
 def run_demo(run_dir, extra: list[str], time_limit: float) -> dict:
@@ -44,6 +46,13 @@ def run_demo(run_dir, extra: list[str], time_limit: float) -> dict:
     return json.loads(summary.read_text())
 
 
+def median_run(summaries: list[dict], key: str, metric: str) -> float:
+    """The median over runs of one latency figure (for an even count, the upper middle run's:
+    a figure some run measured, never an average of two)."""
+    values = sorted(summary["latency_ms"][key][metric] for summary in summaries)
+    return values[len(values) // 2]
+
+
 def run(options) -> "ExperimentResult":
     from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed
 
@@ -52,47 +61,63 @@ def run(options) -> "ExperimentResult":
     record_machine_speed(result)
     folder = options.out / NAME
     folder.mkdir(parents=True, exist_ok=True)
+    # The goals' mode is run several times: one demo's p50 moves by a few tenths of a
+    # millisecond from run to run on this machine (5.5 then 5.7 ms, back to back), as much
+    # as a change being measured; the goals read the median run. The timer mode has no goal.
+    repeats = {"event": options.budget(1, EVENT_RUNS), "timer": 1}
     rows, summaries = [], {}
     for mode, extra in MODES.items():
-        summary = summaries[mode] = run_demo(folder / mode, extra, 60.0)
-        latency = summary["latency_ms"]
-        stats = summary.get("service_stats", {})
-        detector_ms = stats.get("detector", {}).get("p50_ms")
-        locator_ms = stats.get("locator", {}).get("p50_ms")
-        result.figure(f"{mode}/reached", summary["reached"])
+        summaries[mode] = []
+        for index in range(repeats[mode]):
+            name = mode if index == 0 else f"{mode}_{index + 1}"
+            summary = run_demo(folder / name, extra, 60.0)
+            summaries[mode].append(summary)
+            latency = summary["latency_ms"]
+            stats = summary.get("service_stats", {})
+            detector_ms = stats.get("detector", {}).get("p50_ms")
+            locator_ms = stats.get("locator", {}).get("p50_ms")
+            rows.append([name, "yes" if summary["reached"] else "no",
+                         f"{latency['detected_ball_3d']['p50_ms']:.1f} / {latency['detected_ball_3d']['p99_ms']:.1f}",
+                         f"{latency['cmd_vel']['p50_ms']:.1f} / {latency['cmd_vel']['p99_ms']:.1f}",
+                         "-" if detector_ms is None else f"{detector_ms:.1f}",
+                         "-" if locator_ms is None else f"{locator_ms:.2f}",
+                         latency["detected_ball_3d"]["count"]])
+        runs = summaries[mode]
+        result.figure(f"{mode}/runs", len(runs))
+        result.figure(f"{mode}/reached", all(summary["reached"] for summary in runs))
         for key in ("detected_ball_3d", "cmd_vel"):
             for metric in ("p50_ms", "p99_ms", "count"):
-                result.figure(f"{mode}/{key}/{metric}", latency[key][metric])
-        result.figure(f"{mode}/detector_handler_p50_ms", detector_ms)
-        result.figure(f"{mode}/locator_handler_p50_ms", locator_ms)
-        result.figure(f"{mode}/render_ms", stats.get("simulator", {}).get("render_ms"))
-        result.figure(f"{mode}/cmd_vel_per_s", summary["messages_per_s"].get("cmd_vel"))
-        rows.append([mode, "yes" if summary["reached"] else "no",
-                     f"{latency['detected_ball_3d']['p50_ms']:.1f} / {latency['detected_ball_3d']['p99_ms']:.1f}",
-                     f"{latency['cmd_vel']['p50_ms']:.1f} / {latency['cmd_vel']['p99_ms']:.1f}",
-                     "-" if detector_ms is None else f"{detector_ms:.1f}",
-                     "-" if locator_ms is None else f"{locator_ms:.2f}",
-                     latency["detected_ball_3d"]["count"]])
+                result.figure(f"{mode}/{key}/{metric}", median_run(runs, key, metric))
+            result.figure(f"{mode}/{key}/p50_ms_each_run", [summary["latency_ms"][key]["p50_ms"] for summary in runs])
+        for service in ("detector", "locator"):
+            handlers = sorted(value for value in (summary.get("service_stats", {}).get(service, {}).get("p50_ms")
+                                                  for summary in runs) if value is not None)
+            result.figure(f"{mode}/{service}_handler_p50_ms", handlers[len(handlers) // 2] if handlers else None)
+        result.figure(f"{mode}/render_ms", runs[0].get("service_stats", {}).get("simulator", {}).get("render_ms"))
+        result.figure(f"{mode}/cmd_vel_per_s", runs[0]["messages_per_s"].get("cmd_vel"))
     event = summaries["event"]
-    ball, command = event["latency_ms"]["detected_ball_3d"], event["latency_ms"]["cmd_vel"]
-    reached = event["reached"]
+    ball_p50, ball_p99 = median_run(event, "detected_ball_3d", "p50_ms"), median_run(event, "detected_ball_3d", "p99_ms")
+    command_p50 = median_run(event, "cmd_vel", "p50_ms")
+    reached = all(summary["reached"] for summary in event)
+    runs_text = f"median of {len(event)} runs" if len(event) > 1 else "one run"
     result.goal("ball_3d", f"frame -> detected_ball_3d p50 <= {GOAL_BALL_P50_MS:g} ms and p99 <= "
                            f"{GOAL_BALL_P99_MS:g} ms in the demo (event mode, ball reached)",
                 f"<= {GOAL_BALL_P50_MS:g} / {GOAL_BALL_P99_MS:g} ms",
-                f"{ball['p50_ms']:.1f} / {ball['p99_ms']:.1f} ms",
-                reached and ball["p50_ms"] <= GOAL_BALL_P50_MS and ball["p99_ms"] <= GOAL_BALL_P99_MS)
+                f"{ball_p50:.1f} / {ball_p99:.1f} ms ({runs_text})",
+                reached and ball_p50 <= GOAL_BALL_P50_MS and ball_p99 <= GOAL_BALL_P99_MS)
     result.goal("cmd_vel", f"frame -> cmd_vel p50 <= {GOAL_COMMAND_P50_MS:g} ms in the demo, "
                            "follower in event mode (ball reached)",
-                f"<= {GOAL_COMMAND_P50_MS:g} ms", f"{command['p50_ms']:.1f} ms",
-                reached and command["p50_ms"] <= GOAL_COMMAND_P50_MS)
-    result.table(["follower mode", "reached", "frame -> 3D p50 / p99 (ms)",
+                f"<= {GOAL_COMMAND_P50_MS:g} ms", f"{command_p50:.1f} ms ({runs_text})",
+                reached and command_p50 <= GOAL_COMMAND_P50_MS)
+    result.table(["run (follower mode)", "reached", "frame -> 3D p50 / p99 (ms)",
                   "frame -> cmd_vel p50 / p99 (ms)", "detector handler p50 (ms)",
                   "locator handler p50 (ms)", "frames"], rows,
-                 "The demo once per follower mode (arrival times at the demo's subscriber):")
+                 f"Each demo run (arrival times at the demo's subscriber); the goals read the median "
+                 f"of the {len(event)} event-mode run{'s' if len(event) > 1 else ''}:")
     result.compare("frame -> cmd_vel", "not reported (10 Hz control loop)",
-                   f"p50 {command['p50_ms']:.1f} ms (event mode), "
-                   f"{summaries['timer']['latency_ms']['cmd_vel']['p50_ms']:.1f} ms (10 Hz timer)")
+                   f"p50 {command_p50:.1f} ms (event mode), "
+                   f"{median_run(summaries['timer'], 'cmd_vel', 'p50_ms'):.1f} ms (10 Hz timer)")
     result.settings = {"demo": "chase scenario, 640x480 at 30 Hz, real time, run.mcap recorded",
-                       "runs": ", ".join(f"{folder / mode}" for mode in MODES)}
+                       "runs": ", ".join(str(folder / row[0]) for row in rows)}
     result.seconds = clock.seconds
     return result

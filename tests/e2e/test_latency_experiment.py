@@ -11,6 +11,7 @@ def test_latency_experiment_reports_both_follower_modes(tmp_path):
     results = json.loads((tmp_path / "results.json").read_text())
     figures = results["figures"]
     for mode in ("event", "timer"):
+        assert figures[f"latency/{mode}/runs"] == 1  # (--quick: the goals' mode once too)
         assert figures[f"latency/{mode}/reached"] is True
         assert figures[f"latency/{mode}/detected_ball_3d/count"] > 100
         assert 0 < figures[f"latency/{mode}/detected_ball_3d/p50_ms"] <= figures[f"latency/{mode}/detected_ball_3d/p99_ms"]
