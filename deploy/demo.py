@@ -20,8 +20,9 @@ Latency is measured here, by wall-clock arrival times at this program's own subs
 simulator's header stamps are *simulated* time, so they cannot be compared with the wall
 clock. Every message derived from a frame carries the frame's ``seq``; the latency of a
 ``detected_ball_3d`` is its arrival time minus the arrival time of the ``camera/image_raw``
-with the same ``seq``; the same for the first ``cmd_vel`` carrying that ``seq`` (which also
-includes the wait for the follower's 10 Hz timer).
+with the same ``seq``; the same for the ``detected_ball`` it was located from (the detector's
+share of it) and for the first ``cmd_vel`` carrying that ``seq`` (which also includes the wait
+for the follower's 10 Hz timer).
 """
 
 import argparse

@@ -113,6 +113,7 @@ class Observer:
         self.lock = threading.Lock()
         self.counts = {key: 0 for key in COUNTED_KEYS if key != key_table.IMAGE_OUT or video}
         self.image_arrival: dict[int, float] = {}
+        self.detection_arrival: dict[int, float] = {}
         self.ball_arrival: dict[int, float] = {}
         self.command_arrival: dict[int, float] = {}
         self.estimates: list[tuple[float, dict]] = []  # (sim stamp s, Ball3D)
@@ -125,7 +126,8 @@ class Observer:
         self.simulator_stats: dict = {}
         self.stats: dict[str, dict] = {}
         self._entities = []
-        handlers = {key_table.IMAGE_RAW: self._on_image, key_table.DETECTED_BALL_3D: self._on_ball,
+        handlers = {key_table.IMAGE_RAW: self._on_image, key_table.DETECTED_BALL: self._on_detection,
+                    key_table.DETECTED_BALL_3D: self._on_ball,
                     key_table.CMD_VEL: self._on_command, key_table.GROUND_TRUTH: self._on_truth,
                     key_table.IMAGE_OUT: self._on_image_out}
         for key in self.counts:
@@ -156,6 +158,11 @@ class Observer:
         seq = msgpack.unpackb(payload, raw=False)["header"]["seq"]  # only the header is needed
         with self.lock:
             self.image_arrival.setdefault(seq, arrival)
+
+    def _on_detection(self, payload: bytes, arrival: float) -> None:
+        seq = decode("Ball2D", payload)["header"]["seq"]
+        with self.lock:
+            self.detection_arrival.setdefault(seq, arrival)
 
     def _on_ball(self, payload: bytes, arrival: float) -> None:
         ball = decode("Ball3D", payload)
@@ -212,6 +219,7 @@ class Observer:
         with self.lock:
             self.start = sim_time
             self.counts = {key: 0 for key in self.counts}
+            self.detection_arrival.clear()
             self.ball_arrival.clear()
             self.command_arrival.clear()
             self.estimates.clear()
@@ -221,7 +229,10 @@ class Observer:
     def latencies(self) -> dict:
         with self.lock:
             result = {}
-            for name, arrivals in (("detected_ball_3d", self.ball_arrival), ("cmd_vel", self.command_arrival)):
+            # (detected_ball: the detector's share of the way to detected_ball_3d, the rest is
+            # the locator and its two hops through the router)
+            for name, arrivals in (("detected_ball", self.detection_arrival),
+                                   ("detected_ball_3d", self.ball_arrival), ("cmd_vel", self.command_arrival)):
                 values = [1000 * (arrival - self.image_arrival[seq]) for seq, arrival in arrivals.items()
                           if seq in self.image_arrival and arrival >= self.image_arrival[seq]]
                 result[name] = {"p50_ms": percentile(values, 50), "p99_ms": percentile(values, 99),
