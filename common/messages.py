@@ -188,14 +188,17 @@ BALL2D_FIELDS = {
 }
 
 
+_IMAGE_RECORD = record({
+    "header": HEADER,
+    "width": integer(1, MAX_IMAGE_SIDE),
+    "height": integer(1, MAX_IMAGE_SIDE),
+    "encoding": text(tuple(ENCODINGS)),
+    "data": binary,
+})
+
+
 def _check_image(value, path):
-    message = record({
-        "header": HEADER,
-        "width": integer(1, MAX_IMAGE_SIDE),
-        "height": integer(1, MAX_IMAGE_SIDE),
-        "encoding": text(tuple(ENCODINGS)),
-        "data": binary,
-    })(value, path)
+    message = _IMAGE_RECORD(value, path)
     channels = ENCODINGS[message["encoding"]]
     size = len(message["data"])
     if channels:
