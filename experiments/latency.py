@@ -2,8 +2,9 @@
 
 Runs the demo (``deploy/demo.py``: router, simulator in real time at 30 Hz, detector, locator,
 follower and ``balltrack record`` writing ``run.mcap``, each its own process) in each follower
-mode (the goals' mode three times, judged on the median run) and reads the latencies it measured, by wall-clock arrival at its subscriber of a
-frame and of what was derived from it (same ``seq``):
+mode (the goals' mode three times, judged on the median run) and reads the latencies it
+measured, by wall-clock arrival at its subscriber of a frame and of what was derived from it
+(same ``seq``; ``detected_ball`` too, the detector's share):
 
 * ``event``: the follower commands on each detection (``command_on_detection=true``, issue 9's
   mode; the 10 Hz timer stays as the search watchdog);
@@ -89,15 +90,18 @@ def run(options) -> "ExperimentResult":
         for key in ("detected_ball", "detected_ball_3d", "cmd_vel"):
             for metric in ("p50_ms", "p99_ms", "count"):
                 result.figure(f"{mode}/{key}/{metric}", median_run(runs, key, metric))
-            result.figure(f"{mode}/{key}/p50_ms_each_run", [summary["latency_ms"][key]["p50_ms"] for summary in runs])
+            result.figure(f"{mode}/{key}/p50_ms_each_run",
+                          [summary["latency_ms"][key]["p50_ms"] for summary in runs])
         for service in ("detector", "locator"):
             handlers = sorted(value for value in (summary.get("service_stats", {}).get(service, {}).get("p50_ms")
                                                   for summary in runs) if value is not None)
-            result.figure(f"{mode}/{service}_handler_p50_ms", handlers[len(handlers) // 2] if handlers else None)
+            result.figure(f"{mode}/{service}_handler_p50_ms",
+                          handlers[len(handlers) // 2] if handlers else None)
         result.figure(f"{mode}/render_ms", runs[0].get("service_stats", {}).get("simulator", {}).get("render_ms"))
         result.figure(f"{mode}/cmd_vel_per_s", runs[0]["messages_per_s"].get("cmd_vel"))
     event = summaries["event"]
-    ball_p50, ball_p99 = median_run(event, "detected_ball_3d", "p50_ms"), median_run(event, "detected_ball_3d", "p99_ms")
+    ball_p50 = median_run(event, "detected_ball_3d", "p50_ms")
+    ball_p99 = median_run(event, "detected_ball_3d", "p99_ms")
     command_p50 = median_run(event, "cmd_vel", "p50_ms")
     reached = all(summary["reached"] for summary in event)
     runs_text = f"median of {len(event)} runs" if len(event) > 1 else "one run"
