@@ -90,7 +90,8 @@ ROLES: dict[str, Role] = {
     "detector": Role(subscribes=(key_table.IMAGE_RAW,)),
     "locator": Role(subscribes=(key_table.DETECTED_BALL, key_table.CAMERA_INFO),
                     queries=(key_table.CAMERA_INFO,)),
-    # clock only with use_sim_time, the demo's setting.
+    # clock only with use_sim_time, the demo's setting; one detection key at a time, the one
+    # keep_target picks (detected_balls by default), which can be switched live.
     "follower": Role(subscribes=(key_table.DETECTED_BALLS, key_table.DETECTED_BALL, key_table.CLOCK)),
     "simulator": Role(subscribes=(key_table.CMD_VEL, key_table.DETECTED_BALLS),
                       answers=(key_table.CAMERA_INFO,), watches=True),

@@ -272,11 +272,15 @@ def test_roles_grant_what_the_services_declare(tmp_path):
                     zids.setdefault(key.split("/", 1)[1], set()).add(zid)
         session.close()
     assert set(zids) == set(CORE)
+    # Granted for a setting switched live, not declared with the defaults used here: the
+    # follower's other detection key (keep_target=false follows detected_ball).
+    switched = {"follower": {"detected_ball"}}
     for service in CORE:
         (zid,) = zids[service]
         granted = permissions(service)
         entities = declared[zid]
-        assert entities.get("subscriber", set()) == set(granted.subscribes), (service, entities)
+        assert (entities.get("subscriber", set()) == set(granted.subscribes) - switched.get(service, set())), \
+            (service, entities)
         assert entities.get("queryable", set()) == set(granted.answers), (service, entities)
         assert entities.get("token", set()) == set(granted.tokens), (service, entities)
         assert entities.get("publisher", set()) == set(granted.puts), (service, entities)
