@@ -1,5 +1,7 @@
-"""One shutdown rule for every process: SIGINT and SIGTERM set one event."""
+"""One shutdown rule for every process: SIGINT and SIGTERM set one event. (A one-shot command
+that has no event to watch lets SIGTERM interrupt it as Ctrl-C does: ``terminate_as_interrupt``.)"""
 
+import contextlib
 import signal
 import threading
 
@@ -20,3 +22,15 @@ def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
     for signal_number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signal_number, lambda *_: set_from_signal(stop))
     return stop
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt():
+    """Within the block, SIGTERM raises KeyboardInterrupt as SIGINT does, so a command ends
+    the same way on either (its ``except KeyboardInterrupt``: one line, its status); the
+    previous handler is back afterwards. Call from the main thread."""
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

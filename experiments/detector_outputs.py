@@ -22,7 +22,6 @@ Example::
 
 import argparse
 import json
-import signal
 import sys
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from balltrack.common.arguments import integer
 from balltrack.common.messages import MessageError
 from balltrack.common.recording import RecordingError
 from balltrack.common.session import ArgumentParser
+from balltrack.common.shutdown import terminate_as_interrupt
 from balltrack.common.terminal import print_lines
 
 FORMAT = "balltrack detector outputs 1"
@@ -111,6 +111,28 @@ def differences(recorded: list[dict], now: list[dict]) -> list[str]:
     return lines
 
 
+def record_or_compare(args: argparse.Namespace) -> tuple[int, list[str]]:
+    """``main``'s work: the exit status and the lines to print."""
+    if args.action == "record":
+        sources = {"photos": args.photos, "recording": args.recording, "every": args.every,
+                   "renders": args.renders}
+        results = outputs(frames_of(sources))
+        args.file.write_text(json.dumps({"format": FORMAT, "sources": sources, "frames": results}))
+        return 0, [f"detector_outputs: recorded {len(results)} frames in {args.file}"]
+    try:
+        recorded = json.loads(args.file.read_text())
+    except ValueError:
+        raise OSError(f"{args.file}: not a detector outputs file (not JSON)") from None
+    if not isinstance(recorded, dict) or recorded.get("format") != FORMAT:
+        raise OSError(f"{args.file}: not a detector outputs file")
+    lines = differences(recorded["frames"], outputs(frames_of(recorded["sources"])))
+    report = [f"detector_outputs: {len(recorded['frames'])} frames, {len(lines)} differ",
+              *lines[:SHOWN_DIFFERENCES]]
+    if len(lines) > SHOWN_DIFFERENCES:
+        report.append(f"... and {len(lines) - SHOWN_DIFFERENCES} more")
+    return (1 if lines else 0), report
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m balltrack.experiments.detector_outputs", description=__doc__,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -122,39 +144,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="use every this many frames of the recording (default 1)")
     parser.add_argument("--renders", type=integer(minimum=0), default=0, help="simulator renders (default 0)")
     args = parser.parse_args(argv)
+    if args.action == "record" and not (args.photos or args.recording or args.renders):
+        parser.error("record needs frames: --photos, --recording and/or --renders")
     # SIGTERM ends a run as Ctrl-C does: one line, status 1, nothing written
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
-        if args.action == "record":
-            sources = {"photos": args.photos, "recording": args.recording, "every": args.every,
-                       "renders": args.renders}
-            if not (args.photos or args.recording or args.renders):
-                parser.error("record needs frames: --photos, --recording and/or --renders")
-            results = outputs(frames_of(sources))
-            args.file.write_text(json.dumps({"format": FORMAT, "sources": sources, "frames": results}))
-            report = [f"detector_outputs: recorded {len(results)} frames in {args.file}"]
-            status = 0
-        else:
-            try:
-                recorded = json.loads(args.file.read_text())
-            except ValueError:
-                raise OSError(f"{args.file}: not a detector outputs file (not JSON)") from None
-            if not isinstance(recorded, dict) or recorded.get("format") != FORMAT:
-                raise OSError(f"{args.file}: not a detector outputs file")
-            lines = differences(recorded["frames"], outputs(frames_of(recorded["sources"])))
-            report = [f"detector_outputs: {len(recorded['frames'])} frames, {len(lines)} differ",
-                      *lines[:SHOWN_DIFFERENCES]]
-            if len(lines) > SHOWN_DIFFERENCES:
-                report.append(f"... and {len(lines) - SHOWN_DIFFERENCES} more")
-            status = 1 if lines else 0
+        with terminate_as_interrupt():
+            status, report = record_or_compare(args)
     except (OSError, RecordingError, MessageError) as error:
         print(f"detector_outputs: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("detector_outputs: stopped by a signal", file=sys.stderr)
         return 1
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     print_lines(report)  # (quietly, when the reader has gone: `| head`)
     return status
 

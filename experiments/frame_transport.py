@@ -25,7 +25,6 @@ subscriber: three subscribers, the default here.
 import argparse
 import io
 import json
-import signal
 import statistics
 import subprocess
 import sys
@@ -37,6 +36,7 @@ from pathlib import Path
 from balltrack.common.arguments import integer, number
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.session import ArgumentParser, client_config
+from balltrack.common.shutdown import terminate_as_interrupt
 from balltrack.common.terminal import print_lines
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
@@ -229,19 +229,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.subscriber:
         return subscriber(args.subscriber, args.shared_memory == "on", args.expect)
-    # SIGTERM ends a run as Ctrl-C does: the subscribers and the router are stopped on the way out.
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     keep_freed_memory()  # as the services that publish every frame do (common/memory.py)
+    # SIGTERM ends a run as Ctrl-C does: the subscribers and the router are stopped on the way out.
     try:
-        results = run_all(args)
+        with terminate_as_interrupt():
+            results = run_all(args)
     except (RuntimeError, OSError) as error:
         print(f"frame_transport: {error}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("frame_transport: stopped by a signal; no figures", file=sys.stderr)
         return 1
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     lines = [f"put -> subscriber callback over a router on this host, {args.count} messages at "
              f"{args.rate:g} Hz to each of {args.subscribers} subscriber processes:",
              "| payload | shared memory | arrived | p50 (ms) | p90 (ms) | p50 per subscriber (ms) "

@@ -3,7 +3,9 @@
 import signal
 import threading
 
-from balltrack.common.shutdown import stop_on_signals
+import pytest
+
+from balltrack.common.shutdown import stop_on_signals, terminate_as_interrupt
 
 
 def test_a_signal_landing_inside_stop_wait_does_not_deadlock():
@@ -23,3 +25,13 @@ def test_a_signal_landing_inside_stop_wait_does_not_deadlock():
     finally:
         for number, previous in saved.items():
             signal.signal(number, previous)
+
+
+
+def test_terminate_as_interrupt_raises_keyboard_interrupt_then_restores_the_handler():
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        with terminate_as_interrupt():
+            assert signal.getsignal(signal.SIGTERM) is signal.default_int_handler
+            signal.raise_signal(signal.SIGTERM)  # (its handler runs before this returns)
+    assert signal.getsignal(signal.SIGTERM) is before
