@@ -341,9 +341,10 @@ def without_contained(measured: list[Measured]) -> list[Measured]:
 
 def compile_kernels() -> float:
     """Compile the detector's compiled functions (see ``jit.py``), or load them from numba's
-    cache, by detecting balls in two drawn frames: one ball alone and two touching, and a dark
-    frame with a lamp (brightened up to white) take every compiled path a frame takes. Returns the seconds it took (10-40 s compiling, ~0.3 s from
-    the cache on this project's 2-core machines). A service calls it before its first frame
+    cache, by detecting balls in two drawn frames that take every compiled path a frame takes:
+    one ball alone and two touching, and a dark frame with a lamp (brightened up to white).
+    Returns the seconds it took (10-40 s compiling, ~0.3 s from the cache on this project's
+    2-core machines). A service calls it before its first frame
     and ``deploy/setup.sh`` once per install, so that no frame waits for the compiler."""
     started = time.perf_counter()
     frame = np.full((240, 320, 3), (70, 80, 90), np.uint8)
