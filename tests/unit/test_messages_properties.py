@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.messages import (
-    HEADER_FIELDS, MAX_DEPTH, MAX_FRAME_ID, SCHEMAS, MessageError, decode, encode, header, shorten,
+    HEADER_FIELDS, MAX_DEPTH, MAX_FRAME_ID, SCHEMAS, SHARED_BIN_MIN, MessageError, decode, encode, header,
+    shorten, unpack_sharing_bins,
 )
 
 PROPERTY_SETTINGS = settings(max_examples=200, deadline=None,
@@ -278,3 +279,77 @@ def test_a_payload_that_is_no_map_is_refused():
     for scalar in (5, "text", None, 1.5, b"bytes", [1, [2]]):
         with pytest.raises(MessageError, match="expected a map"):
             decode("SimCommand", pack(scalar))
+
+
+# Top-level maps with bins long enough to be bin 16 (bin 8 holds at most 255 bytes), beside
+# anything else: what unpack_sharing_bins shares, at the small minimums drawn below.
+SHARED_MAPS = st.dictionaries(st.text(max_size=12) | st.integers(-5, 5),
+                              PACKABLE | st.binary(min_size=250, max_size=700), max_size=6)
+UNPACK_OPTIONS = {"raw": False, "strict_map_key": False, "max_array_len": 1 << 16, "max_map_len": 1 << 12}
+
+
+def unpacked(payload: bytes, minimum: int):
+    """What unpack_sharing_bins returns, or the type of what it raises, with its shared bins
+    checked (views of ``payload``, read-only, at least ``minimum`` long) and then copied, so
+    that it compares with what msgpack.unpackb returns."""
+    try:
+        value = unpack_sharing_bins(payload, minimum)
+    except Exception as error:
+        return type(error)
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if isinstance(item, memoryview):
+                assert item.obj is payload and item.readonly and len(item) >= minimum
+                value[key] = bytes(item)
+    return pack(value)  # (NaN is not equal to itself: compared packed)
+
+
+def unpacked_by_msgpack(payload: bytes):
+    try:
+        return pack(msgpack.unpackb(payload, **UNPACK_OPTIONS))
+    except Exception as error:
+        return type(error)
+
+
+@PROPERTY_SETTINGS
+@given(value=SHARED_MAPS | PACKABLE, minimum=st.sampled_from([1, 256, 400, SHARED_BIN_MIN]))
+def test_sharing_bins_unpacks_as_msgpack_does(value, minimum):
+    payload = pack(value)
+    assert unpacked(payload, minimum) == unpacked_by_msgpack(payload)
+
+
+@PROPERTY_SETTINGS
+@given(value=SHARED_MAPS, data=st.data())
+def test_sharing_bins_fails_as_msgpack_does(value, data):
+    # Cut short, a byte changed (a bin's length among them), bytes added or removed: the same
+    # value, or the same exception, as msgpack.unpackb.
+    payload = bytearray(pack(value))
+    position = data.draw(st.integers(0, len(payload)))
+    kind = data.draw(st.sampled_from(["truncate", "flip", "insert", "delete"]))
+    if kind == "truncate":
+        del payload[position:]
+    elif kind == "flip" and position < len(payload):
+        payload[position] = data.draw(st.integers(0, 255))
+    elif kind == "insert":
+        payload[position:position] = data.draw(st.binary(min_size=1, max_size=4))
+    else:
+        del payload[position:position + data.draw(st.integers(1, 4))]
+    payload = bytes(payload)
+    assert unpacked(payload, 1) == unpacked_by_msgpack(payload)
+
+
+def test_a_frame_is_decoded_without_copying_its_pixels():
+    pixels = np.random.default_rng(3).integers(0, 256, (480, 640, 3), np.uint8)
+    payload = encode("Image", bgr_to_message(pixels, 5, 7))
+    message = decode("Image", payload)
+    assert isinstance(message["data"], memoryview) and message["data"].obj is payload
+    assert np.array_equal(image_to_bgr(message), pixels)
+    assert encode("Image", message) == payload  # passed on as it came
+    small = decode("Image", encode("Image", _image("bgr8")))
+    assert type(small["data"]) is bytes  # (below SHARED_BIN_MIN: msgpack's own copy)
+
+
+def test_binary_fields_refuse_memoryviews_of_wider_items():
+    data = memoryview(np.zeros((4, 8, 3), np.uint16)).cast("B").cast("H")
+    with pytest.raises(MessageError, match="memoryview of format 'H'"):
+        encode("Image", {**_image("bgr8"), "data": data})
