@@ -101,6 +101,8 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     # (the machine's own speed in the same run: a ratio moves with it)
     assert figures["detector_speed/machine/python_loop_ms"] > 0
     assert figures["detector_speed/machine/opencv_blur_ms"] > 0
+    assert 0 < figures["detector_speed/machine/encode_us"]
+    assert 0 < figures["detector_speed/machine/encode_after_idle_us"]
     report = (tmp_path / "report.md").read_text()
     assert "Machine speed in this run" in report
     # Where the balltrack detector's time goes, per stage: the renders have a ball, so every
