@@ -109,9 +109,9 @@ SPEED_BLURS = 20
 # costs back to back and after the process has been idle for a 30 Hz camera's frame period,
 # as a service is between frames (p50 of SPEED_IDLE_CALLS calls each). Idle, the code and data
 # leave the CPU's caches: on this project's 2-core machines the encode took 9 us back to back
-# and 106 us after 33 ms idle, and a day whose Python loop was 5-8x faster than another's had a
-# demo latency only about 1.2x lower. The latency goals move with this figure more than with the
-# two above.
+# and 106 us after 33 ms idle. Each step of the demo's latency pays that kind of cost, so the
+# latency follows the two figures above only loosely: a day whose Python loop was 5-9x faster
+# than another's had a demo latency only 1.05-1.25x lower.
 SPEED_IDLE = 1.0 / 30.0
 SPEED_IDLE_CALLS = 45
 
