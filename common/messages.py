@@ -33,7 +33,7 @@ SHARED_BIN_MIN = 1 << 16
 # msgpack's first byte and length-field size of the bin formats that can hold SHARED_BIN_MIN
 # bytes (bin 16, bin 32; bin 8 holds at most 255).
 _BIN_LENGTH_BYTES = {0xC5: 2, 0xC6: 4}
-_UNPACK_OPTIONS = {"raw": False, "strict_map_key": False, "max_array_len": 1 << 16, "max_map_len": 1 << 12}
+UNPACK_OPTIONS = {"raw": False, "strict_map_key": False, "max_array_len": 1 << 16, "max_map_len": 1 << 12}
 # The Unpacker reads a payload past its shared bins in pieces of this size (bytes).
 _READ_SIZE = 4096
 
@@ -362,9 +362,9 @@ def unpack_sharing_bins(payload: bytes, minimum: int = SHARED_BIN_MIN) -> Any:
     ``msgpack.unpackb``, which raises as it always does.
     """
     if len(payload) < minimum:
-        return msgpack.unpackb(payload, **_UNPACK_OPTIONS)  # (no bin to share: the quick way)
+        return msgpack.unpackb(payload, **UNPACK_OPTIONS)  # (no bin to share: the quick way)
     file = io.BytesIO(payload)  # (shares payload's memory: no copy)
-    unpacker = msgpack.Unpacker(file, read_size=_READ_SIZE, **_UNPACK_OPTIONS)
+    unpacker = msgpack.Unpacker(file, read_size=_READ_SIZE, **UNPACK_OPTIONS)
     base = 0  # where in payload the current unpacker started reading
     try:
         count = unpacker.read_map_header()
@@ -376,14 +376,14 @@ def unpack_sharing_bins(payload: bytes, minimum: int = SHARED_BIN_MIN) -> Any:
                 message[key] = memoryview(payload)[start:start + length]
                 base = start + length
                 file.seek(base)
-                unpacker = msgpack.Unpacker(file, read_size=_READ_SIZE, **_UNPACK_OPTIONS)
+                unpacker = msgpack.Unpacker(file, read_size=_READ_SIZE, **UNPACK_OPTIONS)
             else:
                 message[key] = unpacker.unpack()
         if base + unpacker.tell() == len(payload):
             return message
     except Exception:  # (msgpack's error, with its message, comes from unpackb below)
         pass
-    return msgpack.unpackb(payload, **_UNPACK_OPTIONS)
+    return msgpack.unpackb(payload, **UNPACK_OPTIONS)
 
 
 def _bin_at(payload: bytes, position: int) -> tuple[int, int]:

@@ -28,7 +28,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import IO, Iterable, Iterator
 
-import msgpack
+from balltrack.common.messages import unpack_sharing_bins
 
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"
@@ -65,8 +65,7 @@ def header_fields(payload: bytes) -> tuple[int | None, int | None]:
     """(stamp, seq) of a message, read leniently: a payload that is not a msgpack map with a
     header gives None for what it lacks. ``Clock`` and ``Stats`` carry their stamp at the top."""
     try:
-        message = msgpack.unpackb(payload, raw=False, strict_map_key=False,
-                                  max_array_len=1 << 16, max_map_len=1 << 12)
+        message = unpack_sharing_bins(bytes(payload))  # (a frame's pixels are not copied)
     except Exception:  # msgpack raises several unrelated exception types; any means "no header"
         return None, None
     if not isinstance(message, dict):

@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.messages import (
-    HEADER_FIELDS, MAX_DEPTH, MAX_FRAME_ID, SCHEMAS, SHARED_BIN_MIN, MessageError, decode, encode, header,
-    shorten, unpack_sharing_bins,
+    HEADER_FIELDS, MAX_DEPTH, MAX_FRAME_ID, SCHEMAS, SHARED_BIN_MIN, UNPACK_OPTIONS, MessageError, decode,
+    encode, header, shorten, unpack_sharing_bins,
 )
 
 PROPERTY_SETTINGS = settings(max_examples=200, deadline=None,
@@ -285,7 +285,6 @@ def test_a_payload_that_is_no_map_is_refused():
 # anything else: what unpack_sharing_bins shares, at the small minimums drawn below.
 SHARED_MAPS = st.dictionaries(st.text(max_size=12) | st.integers(-5, 5),
                               PACKABLE | st.binary(min_size=250, max_size=700), max_size=6)
-UNPACK_OPTIONS = {"raw": False, "strict_map_key": False, "max_array_len": 1 << 16, "max_map_len": 1 << 12}
 
 
 def unpacked(payload: bytes, minimum: int):
