@@ -316,6 +316,10 @@ def build_parser(name: str, description: str | None, config_class=None) -> argpa
                             epilog=help_text(config_class) if config_class else None,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     add_session_arguments(parser, role=name)
+    parser.add_argument("--peer", action="store_true",
+                        help="join the router as a peer: messages to and from the other peers of this "
+                             "host go over direct links, not through the router (no --secure, no "
+                             "--zenoh-config; the launcher gives it to services of its own router)")
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
 
@@ -326,6 +330,9 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
     blocking ``loop(context)`` to run in the main thread (it must return once ``stop`` is set)."""
     parser = build_parser(name, description, config_class)
     args = parser.parse_args(argv)
+    if args.peer and (args.secure or args.zenoh_config):
+        parser.error("--peer: a peer joins a plain local router (its links bypass a secure "
+                     "router's access control); drop --secure and --zenoh-config, or --peer")
     logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
     try:
         config = load_config(config_class, args.config, args.overrides, section=name)

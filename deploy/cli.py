@@ -116,7 +116,9 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     service must be alive before the next starts, so the last (the simulator) meets a ready
     pipeline; services of a remote router start at once (it may not be up yet). ``secure``:
     a profile folder (``balltrack secure init``); the router is ``host``'s, each service its
-    own role, and this program watches them as ``viewer``."""
+    own role, and this program watches them as ``viewer``. Services of a router started here
+    join it as peers (``--peer``), unless secure, given a Zenoh config or told to ``connect``
+    elsewhere."""
     python = sys.executable
     Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
@@ -146,6 +148,8 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
         specs.append(ChildSpec("router", argv, port=port))
 
+    # (services of a router started here, dialling it on this host, may link to each other)
+    peers = router and not connect and not secure and not zenoh_config
     if connect:
         connect = list(connect)
     elif router:
@@ -167,6 +171,8 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             argv += ["--secure", absolute(secure)]
         elif zenoh_config:
             argv += ["--zenoh-config", absolute(zenoh_config)]
+        elif peers:
+            argv += ["--peer"]  # (direct links between this host's services: common/session.py)
         if config_path is not None and (config_path / f"{name}.toml").is_file():
             argv += ["--config", str(config_path / f"{name}.toml")]
         for override in overrides.get(name, []):

@@ -133,8 +133,10 @@ def run(args) -> int:
         print(f"  router on {endpoint}; watch it from another terminal: balltrack status --connect "
               f"{endpoint}" + (f" --secure {args.secure}" if args.secure else ""), flush=True)
         # With a secure profile the demo is its operator: it watches and resets the simulator.
+        # Otherwise it joins its router as a peer, as the services do: it times their messages
+        # as an app on their host receives them (see common/session.py).
         session = open_session([endpoint], str(secure_client_path(args.secure, "operator")) if args.secure else None,
-                               open_timeout=10)
+                               open_timeout=10, peer=not args.secure)
         video = None if args.no_video else VideoWriter(run_dir / "video.mp4", 30.0, {})
         if video is not None:
             video.start()

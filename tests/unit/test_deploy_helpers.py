@@ -84,3 +84,31 @@ def test_deploy_start_wait_0_still_means_do_not_wait():
     from balltrack.deploy.cli import build_parser
 
     assert build_parser().parse_args(["start", "--wait", "0"]).wait == 0
+
+
+def test_services_of_our_own_router_join_it_as_peers(tmp_path):
+    specs, _ = specs_for("--router", "--listen", "tcp/0.0.0.0:7500", "--services", "detector,locator")
+    assert all("--peer" in spec.argv for spec in specs[1:]) and "--peer" not in specs[0].argv
+    # A router elsewhere, a given router or a Zenoh file: the services stay its clients.
+    config = tmp_path / "client.json5"
+    config.write_text("{}")
+    for arguments in (["--services", "detector", "--connect", "tcp/10.0.0.2:7447"],
+                      ["--router", "--services", "detector", "--connect", "tcp/10.0.0.2:7447"],
+                      ["--router", "--services", "detector", "--zenoh-config", str(config)]):
+        specs, _ = specs_for(*arguments)
+        assert not any("--peer" in spec.argv for spec in specs), arguments
+
+
+def test_a_peer_session_listens_on_loopback_only_and_needs_its_router():
+    import json
+
+    from balltrack.common.session import PEER_LISTEN, client_config
+
+    config = client_config(["tcp/127.0.0.1:7500"], open_timeout=3, peer=True)
+    assert json.loads(config.get_json("mode")) == "peer"
+    assert json.loads(config.get_json("listen/endpoints")) == [PEER_LISTEN] == ["tcp/127.0.0.1:0"]
+    assert json.loads(config.get_json("connect/exit_on_failure")) is True
+    assert json.loads(config.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(client_config(["tcp/127.0.0.1:7500"]).get_json("mode")) == "client"
+    with pytest.raises(ValueError, match="no Zenoh config file"):
+        client_config(None, "client.json5", peer=True)
