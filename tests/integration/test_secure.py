@@ -266,7 +266,8 @@ def test_roles_grant_what_the_services_declare(tmp_path):
                 continue
             holders = json.loads(reply.ok.payload.to_bytes())
             key = "/".join(parts[4:])
-            for zid in holders.get("clients", []):
+            # (the launcher's services join a plain router as its peers, see common/session.py)
+            for zid in holders.get("clients", []) + holders.get("peers", []):
                 declared.setdefault(zid, {}).setdefault(parts[3], set()).add(key)
                 if parts[3] == "token" and key.startswith("alive/"):
                     zids.setdefault(key.split("/", 1)[1], set()).add(zid)
