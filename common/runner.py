@@ -265,7 +265,10 @@ class ServiceContext:
         the wait ends with an error, and the worker returns once done with a sample in hand."""
         for subscriber in self._waited_on:
             self._declared.remove(subscriber)
-            subscriber.undeclare()
+            try:
+                subscriber.undeclare()
+            except Exception:  # (as for every entity at stop; closing the session ends the wait then)
+                pass
         self._waited_on.clear()
 
     def join_threads(self, timeout: float = 5.0) -> None:
