@@ -36,7 +36,7 @@ from balltrack.common.config import (ConfigError, config_to_dict, describe_confi
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (ArgumentParser, SessionOpenError, add_session_arguments, close_session,
-                                      open_from_args)
+                                      open_from_args, peer_conflict)
 from balltrack.common.shutdown import stop_on_signals
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
@@ -340,11 +340,7 @@ def build_parser(name: str, description: str | None, config_class=None) -> argpa
     parser = ArgumentParser(prog=f"balltrack run {name}", description=description,
                             epilog=help_text(config_class) if config_class else None,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_session_arguments(parser, role=name)
-    parser.add_argument("--peer", action="store_true",
-                        help="join the router as a peer: messages to and from the other peers of this "
-                             "host go over direct links, not through the router (no --secure, no "
-                             "--zenoh-config; the launcher gives it to services of its own router)")
+    add_session_arguments(parser, role=name, peer=True)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
 
@@ -355,9 +351,9 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
     blocking ``loop(context)`` to run in the main thread (it must return once ``stop`` is set)."""
     parser = build_parser(name, description, config_class)
     args = parser.parse_args(argv)
-    if args.peer and (args.secure or args.zenoh_config):
-        parser.error("--peer: a peer joins a plain local router (its links bypass a secure "
-                     "router's access control); drop --secure and --zenoh-config, or --peer")
+    conflict = peer_conflict(args)
+    if conflict:
+        parser.error(conflict)
     logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
     try:
         config = load_config(config_class, args.config, args.overrides, section=name)

@@ -7,7 +7,7 @@ and peers never mesh around a router's access control. The reconnection period i
 a restarted router is rejoined in a fraction of a second.
 
 Services launched with their own router on one host (``--peer``, which the launcher gives
-them) join it as peers instead, as rmw_zenoh's nodes do: the router tells each about the
+them; the demo gives it to its recorder too) join it as peers instead, as rmw_zenoh's nodes do: the router tells each about the
 others (gossip), and they exchange messages over direct links, listening on the loopback
 interface only, so only processes of this host link to them. A message then crosses one link
 instead of two and skips the router's process: frame -> ``detected_ball_3d`` took 0.3-0.4 ms less
@@ -48,9 +48,10 @@ class ArgumentParser(argparse.ArgumentParser):
 
 
 def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = True,
-                          role: str | None = None) -> None:
+                          role: str | None = None, peer: bool = False) -> None:
     """The options every service and command shares: --connect, --namespace, --config, --set,
-    --secure (a service's ``role`` is its name; a command takes ``--role``)."""
+    --secure (a service's ``role`` is its name; a command takes ``--role``); with ``peer``,
+    --peer (``peer_conflict`` says when it cannot be used)."""
     parser.add_argument("--connect", action="append", metavar="ENDPOINT", default=None,
                         help=f"router endpoint, repeatable (default: {DEFAULT_ENDPOINT} "
                              "or $BALLTRACK_CONNECT)")
@@ -65,10 +66,24 @@ def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = T
                             help=f"the role with --secure (default {DEFAULT_COMMAND_ROLE}; viewer only reads)")
     else:
         parser.set_defaults(role=role)
+    if peer:
+        parser.add_argument("--peer", action="store_true",
+                            help="join the router as a peer: messages to and from the other peers of "
+                                 "this host go over direct links, not through the router (no --secure, "
+                                 "no --zenoh-config; the launcher and the demo give it to what they "
+                                 "start beside their own router)")
     if config_file:
         parser.add_argument("--config", default=None, metavar="FILE", help="TOML parameter file")
         parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                             dest="overrides", help="override a parameter, repeatable")
+
+
+def peer_conflict(args) -> str | None:
+    """Why ``--peer`` cannot be used with these options (one line), or None."""
+    if getattr(args, "peer", False) and (getattr(args, "secure", None) or getattr(args, "zenoh_config", None)):
+        return ("--peer: a peer joins a plain local router (its links bypass a secure router's "
+                "access control); drop --secure and --zenoh-config, or --peer")
+    return None
 
 
 def _insert(config, key: str, value) -> None:

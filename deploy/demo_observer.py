@@ -8,12 +8,11 @@ import threading
 import time
 from pathlib import Path
 
-import msgpack
 import numpy as np
 
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
-from balltrack.common.messages import MessageError, decode
+from balltrack.common.messages import MessageError, decode, unpack_sharing_bins
 from balltrack.common.referee import Referee
 
 # Keys whose messages are counted (image_tuning is left out: subscribing to it would make the
@@ -155,7 +154,8 @@ class Observer:
         return on_sample
 
     def _on_image(self, payload: bytes, arrival: float) -> None:
-        seq = msgpack.unpackb(payload, raw=False)["header"]["seq"]  # only the header is needed
+        # (only the header is needed: the pixels are not copied again, beside the detector's work)
+        seq = unpack_sharing_bins(payload)["header"]["seq"]
         with self.lock:
             self.image_arrival.setdefault(seq, arrival)
 

@@ -21,6 +21,7 @@ from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
+from balltrack.common.session import peer_conflict
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics, wait_routed
 
@@ -61,6 +62,9 @@ def command_record(args) -> int:
         return _fail(args, "--hold: must be 0 to 10 seconds", 2)
     if not 0 <= args.nice <= 19:
         return _fail(args, "--nice: must be 0 to 19", 2)
+    conflict = peer_conflict(args)
+    if conflict:
+        return _fail(args, conflict, 2)
     if args.nice:
         os.nice(args.nice)  # before the session: threads take the priority of their creator
     keep_freed_memory()  # (frames come and go at 30 a second)
@@ -204,7 +208,7 @@ def command_info(args) -> int:
 
 
 def register(commands) -> None:
-    record = networked(commands, "record", "record keys into an MCAP file", command_record)
+    record = networked(commands, "record", "record keys into an MCAP file", command_record, peer=True)
     record.add_argument("-o", "--output", required=True, metavar="FILE.mcap",
                         help="the file to write (replaced if it exists)")
     record.add_argument("keys", nargs="*", metavar="KEY",

@@ -6,10 +6,10 @@ from balltrack.common.arguments import number
 from balltrack.common.session import SessionOpenError, add_session_arguments, close_session, open_from_args
 
 
-def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0):
-    """A subcommand with the session options and ``--timeout``."""
+def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0, peer: bool = False):
+    """A subcommand with the session options (``peer``: and --peer) and ``--timeout``."""
     sub = commands.add_parser(name, help=help_text, description=help_text)
-    add_session_arguments(sub, config_file=False)
+    add_session_arguments(sub, config_file=False, peer=peer)
     sub.add_argument("--timeout", type=number(minimum=0), default=timeout,
                      help=f"seconds to wait for a router and for answers (default {timeout:g})")
     sub.set_defaults(handler=handler)

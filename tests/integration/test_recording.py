@@ -213,7 +213,8 @@ def test_bad_files_and_arguments_are_one_line_and_exit_2(router, tmp_path):
              ("record", "--connect", router.endpoint),  # no -o
              ("record", "-o", str(tmp_path / "x.mcap"), "--duration", "0"),
              ("record", "-o", str(tmp_path / "x.mcap"), "--hold", "-0.1"),
-             ("record", "-o", str(tmp_path / "x.mcap"), "--nice", "20")]
+             ("record", "-o", str(tmp_path / "x.mcap"), "--nice", "20"),
+             ("record", "-o", str(tmp_path / "x.mcap"), "--peer", "--secure", str(tmp_path))]
     for arguments in cases:
         result = balltrack(*arguments)
         assert result.returncode == 2, (arguments, result.stderr)
