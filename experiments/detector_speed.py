@@ -8,6 +8,7 @@ percentile, the cores called directly (no transport). OpenCV runs single-threade
 (``cv2.setNumThreads(1)``, ``--threads`` to change it): the goal of issue 9 is a balltrack
 detector twice as fast as the plain pipeline on one thread, ratio (wall p50) = plain / balltrack
 >= 2, and on this 2-core machine OpenCV's own threads would share the cores with everything else.
+The photos' calls are also split by set (each folder of ``--photos``): no goal reads those.
 
 The plain pipeline is the paper's (section 2.2): Gaussian blur 5, HSV, CLAHE on V, ``inRange``
 with the detector's HSV ranges, ``HoughCircles`` on the mask with the detector's Hough
@@ -99,8 +100,11 @@ def named_photo_frames(folder: Path) -> list[tuple[Path, np.ndarray]]:
             for path, image in images if image is not None]
 
 
-def photo_frames(folder: Path) -> list[np.ndarray]:
-    return [frame for _, frame in named_photo_frames(folder)]
+def photo_set_name(folder: Path, path: Path) -> str:
+    """The set a photo under ``folder`` belongs to: its first folder below ``folder`` (the
+    folder's own name for photos directly in it)."""
+    parts = path.relative_to(folder).parts
+    return parts[0] if len(parts) > 1 else folder.name
 
 
 def figures(wall: list[float], cpu: list[float]) -> dict[str, float]:
@@ -108,17 +112,21 @@ def figures(wall: list[float], cpu: list[float]) -> dict[str, float]:
             "cpu_p50_ms": statistics.median(cpu), "cpu_p90_ms": statistics.quantiles(cpu, n=10)[-1]}
 
 
-def measure(detectors: dict, frames: list[np.ndarray], repeats: int,
-            pause: float = 0.0) -> dict[str, dict[str, float]]:
+def measure(detectors: dict, frames: list[np.ndarray], repeats: int, pause: float = 0.0,
+            groups: list[str] | None = None) -> dict[str, dict[str, float]]:
     """Per detector, the figures of at least ``repeats`` calls, the detectors taking turns on
-    each frame; ``pause``: seconds idle before each call (see PACED_PAUSE).
+    each frame; ``pause``: seconds idle before each call (see PACED_PAUSE). ``groups``: a
+    group name per frame; the result then also holds, under ``by_group``, each group's figures
+    per detector, from the same calls.
 
     The calls make whole passes over ``frames``, so that every frame counts as often: the
     photos come sorted by folder, and 100 calls on 145 of them timed the first 100 only (the
     10 of real_tennis_dev, on which the plain pipeline's Hough takes up to 400 ms, and none of
     45 indoor photos)."""
     times = {name: ([], []) for name in detectors}
+    framed: list[int] = []  # the frame of each call (the same for every detector)
     for index in range(calls_for(repeats, len(frames))):
+        framed.append(index % len(frames))
         frame = frames[index % len(frames)]
         # Alternate who goes first too: the second call of a pair finds the frame in cache.
         order = list(detectors.items()) if index % 2 == 0 else list(reversed(detectors.items()))
@@ -129,7 +137,14 @@ def measure(detectors: dict, frames: list[np.ndarray], repeats: int,
             detector.detect(frame)
             times[name][0].append((time.perf_counter() - started_wall) * 1000)
             times[name][1].append((time.process_time() - started_cpu) * 1000)
-    return {name: figures(*measured) for name, measured in times.items()}
+    result = {name: figures(*measured) for name, measured in times.items()}
+    if groups is not None:
+        result["by_group"] = {
+            group: {name: figures(*([values[call] for call, frame in enumerate(framed) if groups[frame] == group]
+                                    for values in measured))
+                    for name, measured in times.items()}
+            for group in dict.fromkeys(groups)}
+    return result
 
 
 def calls_for(repeats: int, frame_count: int) -> int:
@@ -212,13 +227,20 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
         detectors = {"plain": PlainDetector(config), "balltrack": BallDetector(config)}
         compile_kernels()  # (as a service does before its first frame: no call waits for numba)
         sets = {"renders": simulator_frames(render_count)}
-        if photos is not None and (frames := photo_frames(photos)):
-            sets["photos"] = frames
-        rows, paced_rows, breakdowns = [], [], {}
+        groups = {"renders": None}
+        if photos is not None and (named := named_photo_frames(photos)):
+            sets["photos"] = [frame for _, frame in named]
+            groups["photos"] = [photo_set_name(photos, path) for path, _ in named]
+        rows, paced_rows, set_rows, breakdowns = [], [], [], {}
         for name, frames in sets.items():
-            measured = measure(detectors, frames, repeats)
+            measured = measure(detectors, frames, repeats, groups=groups[name])
+            by_group = measured.pop("by_group", {})
             row, speedup = recorded(result, name, len(frames), measured)
             rows.append(row)
+            if len(by_group) > 1:  # (photos of several sets: each set's share of the same calls)
+                for group, group_measured in by_group.items():
+                    set_rows.append(recorded(result, f"{name}/set/{group}", groups[name].count(group),
+                                             group_measured, f"{name}: {group}")[0])
             plain, ours = measured["plain"]["wall_p50_ms"], measured["balltrack"]["wall_p50_ms"]
             result.goal(name, f"{name} (640x480, one thread): the balltrack detector at least "
                               f"{GOAL_RATIO:g}x as fast as the plain pipeline (wall p50)",
@@ -241,6 +263,12 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      f"calls back to back. The last row: the renders again, the machine idle "
                      f"{1000 * PACED_PAUSE:.0f} ms before each call, as between a camera's frames "
                      f"(what a service's call costs; no goal):")
+        if set_rows:
+            result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
+                          "plain / balltrack"], set_rows,
+                         "The same calls on the photos, set by set (the goal reads all the photos "
+                         "together; the sets differ: the plain pipeline's Hough is slow on "
+                         "masks full of clutter and quick on clean ones):")
         result.table(["stage", *(f"{name}: {group}" for name in breakdowns
                                  for group in ("all frames", "middle fifth"))], breakdown_rows(breakdowns),
                      f"Where the balltrack detector's time goes, ms per frame (the detector alone, {passes} pass{'es' if passes > 1 else ''} "

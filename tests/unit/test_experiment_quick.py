@@ -7,6 +7,7 @@ tiny frame budget, so this takes a few seconds.
 import json
 import os
 import platform
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,3 +135,39 @@ def test_detector_speed_times_every_frame_as_often():
     for detector in detectors.values():
         assert sorted(detector.seen) == sorted(list(range(7)) * 2)
     assert (calls_for(100, 145), calls_for(300, 145), calls_for(300, 60)) == (145, 435, 300)
+
+
+def test_detector_speed_splits_the_same_calls_by_photo_set(monkeypatch):
+    # Each set's figures come from its own frames' calls: a clock that each call moves on by
+    # its frame's value (ms) makes every call's time known.
+    from balltrack.experiments import detector_speed
+
+    class Clock:
+        now = 0.0
+
+        def perf_counter(self):
+            return self.now
+
+        process_time = perf_counter
+
+    clock = Clock()
+    monkeypatch.setattr(detector_speed, "time", clock)
+
+    class Moving:
+        def __init__(self, factor):
+            self.factor = factor
+
+        def detect(self, frame):
+            clock.now += self.factor * int(frame[0, 0]) / 1000
+
+    frames = [np.full((2, 2), value, np.uint8) for value in (1, 2, 3, 10, 20, 30, 40)]
+    groups = ["a", "a", "a", "b", "b", "b", "b"]
+    measured = detector_speed.measure({"plain": Moving(2), "balltrack": Moving(1)}, frames,
+                                      repeats=14, groups=groups)
+    assert measured["balltrack"]["wall_p50_ms"] == pytest.approx(10)  # all 14 calls
+    assert set(measured["by_group"]) == {"a", "b"}
+    assert measured["by_group"]["a"]["balltrack"]["wall_p50_ms"] == pytest.approx(2)
+    assert measured["by_group"]["b"]["balltrack"]["wall_p50_ms"] == pytest.approx(25)
+    assert measured["by_group"]["b"]["plain"]["cpu_p50_ms"] == pytest.approx(50)
+    assert detector_speed.photo_set_name(Path("/d"), Path("/d/set1/x/a.jpg")) == "set1"
+    assert detector_speed.photo_set_name(Path("/d/set1"), Path("/d/set1/a.jpg")) == "set1"
