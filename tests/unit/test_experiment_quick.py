@@ -169,5 +169,10 @@ def test_detector_speed_splits_the_same_calls_by_photo_set(monkeypatch):
     assert measured["by_group"]["a"]["balltrack"]["wall_p50_ms"] == pytest.approx(2)
     assert measured["by_group"]["b"]["balltrack"]["wall_p50_ms"] == pytest.approx(25)
     assert measured["by_group"]["b"]["plain"]["cpu_p50_ms"] == pytest.approx(50)
+    # a set of one photo timed once has its one call as its p90
+    single = detector_speed.measure({"plain": Moving(2), "balltrack": Moving(1)}, frames, repeats=7,
+                                    groups=["a"] * 6 + ["c"])
+    assert single["by_group"]["c"]["balltrack"] == {"wall_p50_ms": pytest.approx(40), "wall_p90_ms": pytest.approx(40),
+                                                     "cpu_p50_ms": pytest.approx(40), "cpu_p90_ms": pytest.approx(40)}
     assert detector_speed.photo_set_name(Path("/d"), Path("/d/set1/x/a.jpg")) == "set1"
     assert detector_speed.photo_set_name(Path("/d/set1"), Path("/d/set1/a.jpg")) == "set1"
