@@ -85,8 +85,8 @@ def start_recording(run_dir: Path, endpoint: str, args, stop: threading.Event) -
     else:
         # A peer, as the services: their messages reach it over direct links. As a client of
         # the router, every message to it took one more hop, through the router's process,
-        # while the pipeline worked on the frame. frame -> detected_ball_3d p50 in two demos
-        # each: 4.5/4.3 ms with the recorder a client, 4.0/4.1 a peer, 3.7/3.7 with none.
+        # while the pipeline worked on the frame: frame -> detected_ball_3d p50 4.3 and 4.3 ms
+        # as a peer against 4.4 and 4.5 (`balltrack experiment latency`, alternated).
         arguments += ["--peer"]
     recorder = Command(arguments, run_dir / "record.log")
     try:
