@@ -9,9 +9,10 @@ a restarted router is rejoined in a fraction of a second.
 Services launched with their own router on one host (``--peer``, which the launcher gives
 them; the demo gives it to its recorder too) join it as peers instead, as rmw_zenoh's nodes
 do: the router tells each about the others (gossip), and they exchange messages over direct
-links, listening on the loopback interface only, so only processes of this host link to them. A message then crosses one link
-instead of two and skips the router's process: frame -> ``detected_ball_3d`` took 0.3-0.4 ms less
-in the demo (``balltrack experiment latency``, alternated runs). Secure setups stay clients.
+links, listening on the loopback interface only, so only processes of this host link to them.
+A message then crosses one link instead of two and skips the router's process: frame ->
+``detected_ball_3d`` took 0.3-0.4 ms less in the demo (``balltrack experiment latency``,
+alternated runs). Secure setups stay clients.
 """
 
 import argparse

@@ -129,9 +129,8 @@ def measure(detectors: dict, frames: list[np.ndarray], repeats: int, pause: floa
     10 of real_tennis_dev, on which the plain pipeline's Hough takes up to 400 ms, and none of
     45 indoor photos)."""
     times = {name: ([], []) for name in detectors}
-    framed: list[int] = []  # the frame of each call (the same for every detector)
-    for index in range(calls_for(repeats, len(frames))):
-        framed.append(index % len(frames))
+    calls = calls_for(repeats, len(frames))
+    for index in range(calls):
         frame = frames[index % len(frames)]
         # Alternate who goes first too: the second call of a pair finds the frame in cache.
         order = list(detectors.items()) if index % 2 == 0 else list(reversed(detectors.items()))
@@ -146,8 +145,9 @@ def measure(detectors: dict, frames: list[np.ndarray], repeats: int, pause: floa
     if groups is not None:
         result["by_group"] = {}
         for group in dict.fromkeys(groups):
-            calls = [call for call, frame in enumerate(framed) if groups[frame] == group]
-            result["by_group"][group] = {name: figures([wall[call] for call in calls], [cpu[call] for call in calls])
+            # (call i was on frame i mod the frame count, for every detector)
+            mine = [call for call in range(calls) if groups[call % len(frames)] == group]
+            result["by_group"][group] = {name: figures([wall[call] for call in mine], [cpu[call] for call in mine])
                                          for name, (wall, cpu) in times.items()}
     return result
 
@@ -158,6 +158,8 @@ def calls_for(repeats: int, frame_count: int) -> int:
 
 
 NAME = "detector_speed"
+# The columns of the speed tables (rows from ``recorded``).
+SPEED_HEADERS = ["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)", "plain / balltrack"]
 TITLE = "Detector speed against the paper's plain pipeline"
 
 
@@ -259,8 +261,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
             for stage, times in breakdowns[name].items():
                 result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
                 result.figure(f"{name}/stage/{stage}/middle_ms", times["middle"])
-        result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
-                      "plain / balltrack"], rows + paced_rows,
+        result.table(SPEED_HEADERS, rows + paced_rows,
                      f"Calls alternating on the same frames, in whole passes over each set "
                      f"({', '.join(f'{calls_for(repeats, len(frames))} on the {name}' for name, frames in sets.items())}, "
                      f"per detector), "
@@ -269,8 +270,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      f"{1000 * PACED_PAUSE:.0f} ms before each call, as between a camera's frames "
                      f"(what a service's call costs; no goal):")
         if set_rows:
-            result.table(["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90 (ms)",
-                          "plain / balltrack"], set_rows,
+            result.table(SPEED_HEADERS, set_rows,
                          "The same calls on the photos, set by set (the goal reads all the photos "
                          "together; the sets differ: the plain pipeline's Hough is slow on "
                          "masks full of clutter and quick on clean ones):")

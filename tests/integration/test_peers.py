@@ -20,6 +20,17 @@ def frame_message(seq: int) -> bytes:
     return encode("Image", bgr_to_message(image, 1_000_000_000 * seq, seq))
 
 
+def round_trips_across_router_stop(session, router, answers: Collector) -> None:
+    """Frame 1 put until its answer (header seq 1) arrives in ``answers``; then the router
+    stopped, and frame 2 put until its answer arrives too: the peers' direct links carry it."""
+    put_until(lambda _: session.put("camera/image_raw", frame_message(1)), answers,
+              lambda items: [item for item in items if item["header"]["seq"] == 1], 60, 1, "seq 1")
+    assert router.stop() == 0, router.process.output()
+    put_until(lambda _: session.put("camera/image_raw", frame_message(2)), answers,
+              lambda items: [item for item in items if item["header"]["seq"] == 2], 20, 1,
+              "seq 2 with the router stopped")
+
+
 def test_peers_keep_exchanging_messages_without_their_router(router, log_dir):
     services = [start_service(name, router.endpoint, log_dir, "--peer") for name in ("detector", "locator")]
     session = open_session([router.endpoint], open_timeout=10, peer=True)
@@ -29,13 +40,8 @@ def test_peers_keep_exchanging_messages_without_their_router(router, log_dir):
                    "direct links to the detector and the locator", *services)
         located = Collector(session, "detected_ball_3d", "Ball3D")
         session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
-        put_until(lambda _: session.put("camera/image_raw", frame_message(1)), located,
-                  lambda items: [item for item in items if item["header"]["seq"] == 1], 60, 1, "seq 1")
-        assert router.stop() == 0, router.process.output()
         # With the router gone, frame -> detector -> locator -> here still goes round.
-        put_until(lambda _: session.put("camera/image_raw", frame_message(2)), located,
-                  lambda items: [item for item in items if item["header"]["seq"] == 2], 20, 1,
-                  "seq 2 with the router stopped")
+        round_trips_across_router_stop(session, router, located)
         located.close()
     finally:
         session.close()
@@ -57,12 +63,7 @@ def test_a_peer_recorder_records_the_peers_with_their_router_gone(router, log_di
         wait_until(lambda: len(list(session.info.peers_zid())) >= 2, 60,
                    "direct links to the detector and the recorder", detector, recorder)
         detected = Collector(session, "detected_ball", "Ball2D")
-        put_until(lambda _: session.put("camera/image_raw", frame_message(1)), detected,
-                  lambda items: [item for item in items if item["header"]["seq"] == 1], 60, 1, "seq 1")
-        assert router.stop() == 0, router.process.output()
-        put_until(lambda _: session.put("camera/image_raw", frame_message(2)), detected,
-                  lambda items: [item for item in items if item["header"]["seq"] == 2], 20, 1,
-                  "seq 2 with the router stopped")
+        round_trips_across_router_stop(session, router, detected)
         detected.close()
         # (the recorder's progress lines count what it wrote: as many as arrived here)
         wait_until(lambda: written(recorder) >= len(detected.messages), 30,
