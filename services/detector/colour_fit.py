@@ -33,6 +33,7 @@ import numpy as np
 from balltrack.services.detector.measure import mean_hue
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
+from balltrack.services.detector.geometry import gaussian_blur
 
 # Of a ball, the disc of this share of its radius is sampled.
 BALL_DISC = 0.8
@@ -112,10 +113,7 @@ def colour_samples(image_bgr: np.ndarray, circles: list[tuple[float, float, floa
     if work_size is not None:
         scale, scale_y = work_size[0] / width, work_size[1] / height
         work = cv2.resize(image_bgr, work_size, interpolation=cv2.INTER_AREA)
-    blurred = work
-    if config.blur_kernel > 1:
-        blurred = cv2.GaussianBlur(work, (config.blur_kernel, config.blur_kernel), 0)
-    hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
+    hsv = cv2.cvtColor(gaussian_blur(work, config.blur_kernel), cv2.COLOR_BGR2HSV)
     work_height, work_width = hsv.shape[:2]
     ball = np.zeros((work_height, work_width), np.uint8)
     near = np.zeros((work_height, work_width), np.uint8)

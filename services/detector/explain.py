@@ -22,6 +22,7 @@ import numpy as np
 from balltrack.services.detector.checks import failed_checks, hue_in_range
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import DetectionResult, JudgedCandidate
+from balltrack.services.detector.geometry import gaussian_blur
 from balltrack.services.detector.mask import check_image
 
 # Without a ball's radius, a place's colour is read within this many px of it.
@@ -93,9 +94,7 @@ def colour_at(image_bgr: np.ndarray, mask: np.ndarray, config: DetectorConfig, u
     # (the blur needs the kernel's reach around the window)
     margin = config.blur_kernel
     outer = (slice(max(0, top - margin), bottom + margin), slice(max(0, left - margin), right + margin))
-    patch = image_bgr[outer]
-    if config.blur_kernel > 1:
-        patch = cv2.GaussianBlur(patch, (config.blur_kernel, config.blur_kernel), 0)
+    patch = gaussian_blur(image_bgr[outer], config.blur_kernel)
     rows, columns = np.mgrid[top:bottom, left:right]
     inside = (columns - u) ** 2 + (rows - v) ** 2 <= reach * reach
     if not inside.any():

@@ -25,7 +25,7 @@ from balltrack.services.detector.checks import SURE_SIZE, CandidateMetrics, judg
 from balltrack.services.detector.measure import NO_COLOUR, MaskMetrics, colour_stats, measure_mask
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.fit import robust_circle
-from balltrack.services.detector.geometry import Candidate, box_around, brightest_channel, disc
+from balltrack.services.detector.geometry import Candidate, box_around, brightest_channel, disc, gaussian_blur
 from balltrack.services.detector.mask import EXPLAINED, ColourPlanes, hue_mask
 
 # Below this saturation (0-255) a pixel is near white and its hue is noise; paler pixels
@@ -64,9 +64,7 @@ def needs_highlight(metrics: CandidateMetrics, config: DetectorConfig) -> bool:
 def pale_pixels(patch_bgr: np.ndarray, config: DetectorConfig, brightness: float) -> np.ndarray:
     """Boolean plane of a BGR patch: pixels below the colour range's saturation, at least
     ``brightness`` bright (V, 0-255), and either near white or of the target's hue."""
-    kernel = config.blur_kernel
-    blurred = cv2.GaussianBlur(patch_bgr, (kernel, kernel), 0) if kernel > 1 else patch_bgr
-    hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
+    hsv = cv2.cvtColor(gaussian_blur(patch_bgr, config.blur_kernel), cv2.COLOR_BGR2HSV)
     hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
     hue_ok = hue_mask(hue, config) == 255
     return (saturation < config.s_min) & (value >= brightness) & ((saturation < NEAR_WHITE) | hue_ok)

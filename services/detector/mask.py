@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.geometry import brightest_channel
+from balltrack.services.detector.geometry import brightest_channel, gaussian_blur
 from balltrack.services.detector.jit import compiled
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
@@ -209,10 +209,7 @@ class ColourMasker:
         """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask and the chroma.
         ``equalised``: the CLAHE-equalised value plane of the part, None to equalise its own."""
         config = self.config
-        blurred = gained
-        if kernel > 1:
-            blurred = cv2.GaussianBlur(gained, (kernel, kernel), 0)
-        hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
+        hsv = cv2.cvtColor(gaussian_blur(gained, kernel), cv2.COLOR_BGR2HSV)
         # (three extractChannel calls are several times faster than one cv2.split here)
         hue, saturation, value = (cv2.extractChannel(hsv, channel) for channel in range(3))
         # Adaptive histogram equalisation: v_min/v_max apply to locally normalised brightness,
