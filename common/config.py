@@ -324,6 +324,22 @@ def parse_overrides(overrides: Iterable[str]) -> dict[str, str]:
     return parsed
 
 
+def settings_by_service(items: Iterable[str], services: Iterable[str], among: str) -> dict[str, list[str]]:
+    """``--set SERVICE.KEY=VALUE`` items, for several services at once, as ``KEY=VALUE`` lists
+    per service of ``services``; a ConfigError (one line) for a malformed item or a service
+    not among them (``among`` says which those are: "--services")."""
+    grouped: dict[str, list[str]] = {name: [] for name in services}
+    for item in items:
+        target, separator, value = item.partition("=")
+        service, dot, key = target.partition(".")
+        if not separator or not dot or not service.strip() or not key.strip():
+            raise ConfigError(f"--set {item}: expected SERVICE.KEY=VALUE, e.g. follower.max_size_thresh=0.3")
+        if service.strip() not in grouped:
+            raise ConfigError(f"--set {item}: {service.strip()} is not among {among}")
+        grouped[service.strip()].append(f"{key.strip()}={value}")
+    return grouped
+
+
 def read_config_file(path: str | Path, section: str | None = None) -> dict[str, Any]:
     """Read a TOML file; keys at top level or under ``[section]`` (the service's name)."""
     try:

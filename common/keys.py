@@ -11,6 +11,13 @@ from dataclasses import dataclass
 CORE_SERVICES = ("detector", "locator", "follower", "simulator")
 # The camera publishes what the simulator does, from a real camera: one or the other runs.
 SERVICES = (*CORE_SERVICES, "ros2_bridge", "camera")
+# Services joined by this run in one process, on one session (``balltrack run detector+locator``).
+PROCESS_JOIN = "+"
+
+
+def process_services(process: str) -> list[str]:
+    """The services of a process name: ``detector+locator`` -> ``["detector", "locator"]``."""
+    return process.split(PROCESS_JOIN)
 
 IMAGE_RAW = "camera/image_raw"
 CAMERA_INFO = "camera/camera_info"

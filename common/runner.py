@@ -32,8 +32,8 @@ import zenoh
 from balltrack.common import keys as key_table
 from balltrack.common.clock import SimClock, TimerTicks, WallClock
 from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
-                                     replace_config)
-from balltrack.common.keys import Keys
+                                     replace_config, settings_by_service)
+from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (ArgumentParser, SessionOpenError, add_session_arguments, close_session,
                                       open_from_args, peer_conflict)
@@ -361,7 +361,59 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
     except (ConfigError, ValueError) as error:
         print(f"{name}: {error}", file=sys.stderr)
         return 2
+    return serve(name, args, [(name, config, build)])
 
+
+def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Callable | None]]],
+                 argv: list[str] | None = None, description: str | None = None) -> int:
+    """Run several services in one process, on one session, until SIGINT/SIGTERM
+    (``balltrack run detector+locator``): ``services`` are (name, config class, build), each
+    as ``run_service`` takes them. A message from one to another is then a call in this
+    process (Zenoh delivers a put to its own session's subscribers at once), not a hop to
+    another process that must wake up; every key and message stays as it is, for anyone else."""
+    names = [name for name, _, _ in services]
+    label = PROCESS_JOIN.join(names)
+    parser = ArgumentParser(prog=f"balltrack run {label}", description=description,
+                            epilog="Each service's parameters, given here as --set SERVICE.NAME=VALUE or in "
+                                   "the file of --config SERVICE=FILE:\n\n"
+                                   + "\n\n".join(f"{name} {help_text(config_class)}" for name, config_class, _ in services),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_session_arguments(parser, config_file=False, role=label, peer=True)
+    parser.add_argument("--config", action="append", default=[], metavar="SERVICE=FILE", dest="configs",
+                        help="a service's TOML parameter file, repeatable")
+    parser.add_argument("--set", action="append", default=[], metavar="SERVICE.KEY=VALUE",
+                        dest="overrides", help="override a service's parameter, repeatable")
+    parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    args = parser.parse_args(argv)
+    if args.secure:
+        parser.error("--secure: a secure setup gives each service its own certificate and role; "
+                     "run these services as processes of their own")
+    conflict = peer_conflict(args)
+    if conflict:
+        parser.error(conflict)
+    logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
+    try:
+        files: dict[str, str] = {}
+        for item in args.configs:
+            service, separator, path = item.partition("=")
+            if not separator or service not in names:
+                raise ConfigError(f"--config {item}: expected SERVICE=FILE, SERVICE one of {', '.join(names)}")
+            files[service] = path
+        overrides = settings_by_service(args.overrides, names, f"this process's {', '.join(names)}")
+        configs = [load_config(config_class, files.get(name), overrides[name], section=name)
+                   for name, config_class, _ in services]
+        Keys(args.namespace)
+    except (ConfigError, ValueError) as error:
+        print(f"{label}: {error}", file=sys.stderr)
+        return 2
+    return serve(label, args, [(name, config, build) for (name, _, build), config in zip(services, configs)])
+
+
+def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceContext], Callable | None]]]) -> int:
+    """Open the session of ``args`` and run ``services`` ((name, config, build) each) on it
+    until SIGINT/SIGTERM: one process, one session, each service with its own context (stats,
+    config queryable, liveliness token) as if it ran alone. ``label`` names the process in
+    its messages. Every ``loop`` a build returns runs (the last in the main thread)."""
     # The session opens in a thread so that SIGINT/SIGTERM while the router is still
     # unreachable ends the service at once with status 0, as when it is running.
     stop = stop_on_signals()
@@ -374,53 +426,71 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
             opened["error"] = error
         opened["done"] = True
 
-    threading.Thread(target=open_session, name=f"{name}-open", daemon=True).start()
+    threading.Thread(target=open_session, name=f"{label}-open", daemon=True).start()
     while "done" not in opened and not stop.wait(0.1):
         pass
     if "error" in opened:
-        print(f"{name}: {opened['error']}", file=sys.stderr)
+        print(f"{label}: {opened['error']}", file=sys.stderr)
         return 1
     if "session" not in opened:
-        logging.getLogger(name).info("stopped before a router answered")
+        logging.getLogger(label).info("stopped before a router answered")
         os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined
     session = opened["session"]
 
-    context = ServiceContext(name, session, args.namespace, config, stop)
+    contexts = [ServiceContext(name, session, args.namespace, config, stop) for name, config, _ in services]
     status = 0
     try:
-        loop = build(context)
-        stats_publisher = context.session.declare_publisher(context.keys(key_table.stats_key(name)))
-        context._declared.append(stats_publisher)
-        context._declared.append(context.session.declare_queryable(
-            context.keys(key_table.config_key(name)), lambda query: _serve_config(context, query)))
-        token = context.session.liveliness().declare_token(context.keys(key_table.alive_key(name)))
-
-        def publish_stats():
-            while not context.stop.wait(1.0):
-                stats_publisher.put(encode("Stats", context.stats.snapshot(time.time_ns())))
-
-        context.start_thread(publish_stats, f"{name}-stats")
-        context.log.info("running (namespace %r)", context.keys.namespace)
-        if loop is not None:
-            loop(context)
+        loops = []
+        tokens = []
+        for context, (_, _, build) in zip(contexts, services):
+            loop = build(context)
+            if loop is not None:
+                loops.append((context, loop))
+            tokens.append(_announce(context))
+        for context, loop in loops[:-1]:
+            context.start_thread(lambda context=context, loop=loop: loop(context), f"{context.name}-loop")
+        if loops:
+            loops[-1][1](loops[-1][0])
         # A timed wait keeps the main thread responsive to signals on every platform.
-        while not context.stop.wait(0.5):
+        while not stop.wait(0.5):
             pass
-        token.undeclare()
+        for token in tokens:
+            token.undeclare()
     except (ConfigError, ValueError) as error:
-        print(f"{name}: {error}", file=sys.stderr)
+        print(f"{label}: {error}", file=sys.stderr)
         status = 2
     finally:
-        context.stop.set()
-        context.release_waiting()
-        context.join_threads()
-        for entity in reversed(context._declared):
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
+        stop.set()
+        for context in reversed(contexts):
+            context.release_waiting()
+            context.join_threads()
+            for entity in reversed(context._declared):
+                try:
+                    entity.undeclare()
+                except Exception:
+                    pass
         reason = close_session(session)
         if reason:
-            context.log.warning("%s", reason)
-    context.log.info("stopped")
+            logging.getLogger(label).warning("%s", reason)
+    for context in contexts:
+        context.log.info("stopped")
     return status
+
+
+def _announce(context: ServiceContext):
+    """Publish a built service's stats at 1 Hz, answer its config queries and declare it
+    alive; returns its liveliness token."""
+    name = context.name
+    stats_publisher = context.session.declare_publisher(context.keys(key_table.stats_key(name)))
+    context._declared.append(stats_publisher)
+    context._declared.append(context.session.declare_queryable(
+        context.keys(key_table.config_key(name)), lambda query: _serve_config(context, query)))
+    token = context.session.liveliness().declare_token(context.keys(key_table.alive_key(name)))
+
+    def publish_stats():
+        while not context.stop.wait(1.0):
+            stats_publisher.put(encode("Stats", context.stats.snapshot(time.time_ns())))
+
+    context.start_thread(publish_stats, f"{name}-stats")
+    context.log.info("running (namespace %r)", context.keys.namespace)
+    return token

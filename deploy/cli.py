@@ -25,7 +25,8 @@ import sys
 from pathlib import Path
 
 from balltrack.common.arguments import number
-from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys
+from balltrack.common.config import ConfigError, settings_by_service
+from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services
 from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, close_session,
                                       default_endpoints, load_config_file, secure_client_path,
                                       secure_router_path)
@@ -63,26 +64,24 @@ def local_endpoint(listen: str) -> str:
 
 
 def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, list[str]]:
-    overrides: dict[str, list[str]] = {name: [] for name in services}
-    for item in items:
-        target, separator, value = item.partition("=")
-        service, dot, key = target.partition(".")
-        if not separator or not dot or not key:
-            raise LaunchError(f"--set {item}: expected SERVICE.KEY=VALUE, e.g. follower.max_size_thresh=0.3")
-        if service not in SERVICES:
-            raise LaunchError(f"--set {item}: unknown service {service!r} (one of {', '.join(SERVICES)})")
-        if service not in overrides:
-            raise LaunchError(f"--set {item}: {service} is not among --services")
-        overrides[service].append(f"{key}={value}")
-    return overrides
+    """``--set SERVICE.KEY=VALUE`` items per service of ``services`` (processes: a name may
+    join several, ``detector+locator``), as ``KEY=VALUE``."""
+    try:
+        return settings_by_service(items, [name for process in services for name in process_services(process)],
+                                   "--services")
+    except ConfigError as error:
+        raise LaunchError(str(error)) from None
 
 
 def build_specs(args) -> tuple[list[ChildSpec], dict]:
     """The children (router first) and the facts ``status`` needs, from ``start``'s options."""
     services = [name.strip() for name in args.services.split(",") if name.strip()]
-    unknown = [name for name in services if name not in SERVICES]
+    names = [name for process in services for name in process_services(process)]
+    unknown = [name for name in names if name not in SERVICES]
     if unknown:
         raise LaunchError(f"--services: unknown {', '.join(unknown)} (known: {', '.join(SERVICES)})")
+    if len(set(names)) != len(names):
+        raise LaunchError(f"--services: {args.services}: a service may run once")
     if not args.router and (args.listen or args.router_connect or args.router_config or args.host):
         raise LaunchError("--listen, --router-connect, --router-config and --host need --router")
     if args.secure and (args.router_config or args.zenoh_config):
@@ -122,6 +121,10 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     python = sys.executable
     Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
+    joined = [process for process in services if len(process_services(process)) > 1]
+    if secure and joined:
+        raise LaunchError(f"{joined[0]}: with --secure each service has its own certificate and role, "
+                          "so each runs in a process of its own")
     if secure:
         try:
             if router:
@@ -161,8 +164,11 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     config_path = Path(config_dir).resolve() if config_dir else None
     if config_path is not None and not config_path.is_dir():
         raise LaunchError(f"--config-dir: {config_dir} is not a directory")
-    for name in services:
-        argv = [python, "-m", f"balltrack.services.{name}"]
+    for process in services:
+        names = process_services(process)
+        joined = len(names) > 1
+        # (services joined in one process: ``balltrack run``, their files and settings named)
+        argv = [python, "-m", "balltrack", "run", process] if joined else [python, "-m", f"balltrack.services.{process}"]
         for endpoint in connect:
             argv += ["--connect", endpoint]
         if namespace:
@@ -173,13 +179,17 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             argv += ["--zenoh-config", absolute(zenoh_config)]
         elif peers:
             argv += ["--peer"]  # (direct links between this host's services: common/session.py)
-        if config_path is not None and (config_path / f"{name}.toml").is_file():
-            argv += ["--config", str(config_path / f"{name}.toml")]
-        for override in overrides.get(name, []):
-            argv += ["--set", override]
+        for name in names:
+            if config_path is not None and (config_path / f"{name}.toml").is_file():
+                path = str(config_path / f"{name}.toml")
+                argv += ["--config", f"{name}={path}" if joined else path]
+            for override in overrides.get(name, []):
+                argv += ["--set", f"{name}.{override}" if joined else override]
         argv += ["--log-level", log_level]
-        specs.append(ChildSpec(name, argv, wait_alive=router and name != services[-1]))
-    info = {"connect": connect, "namespace": namespace, "services": list(services),
+        specs.append(ChildSpec(process, argv, wait_alive=router and process != services[-1]))
+    # (the services themselves, each with its liveliness token, whichever process runs it)
+    info = {"connect": connect, "namespace": namespace,
+            "services": [name for process in services for name in process_services(process)],
             "zenoh_config": absolute(zenoh_config), "router": bool(router), "secure": absolute(secure)}
     return specs, info
 

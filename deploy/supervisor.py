@@ -42,6 +42,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from balltrack.common.keys import process_services
 from balltrack.common.shutdown import set_from_signal
 
 LOG = logging.getLogger("supervisor")
@@ -295,7 +296,7 @@ class Supervisor:
                 LOG.warning("%s is not accepting connections on port %d", child.spec.name,
                             child.spec.port)
         if child.spec.wait_alive and child.restarts == 0:
-            missing = wait_alive(self.info, [child.spec.name], self.settings.alive_timeout, self.stop,
+            missing = wait_alive(self.info, process_services(child.spec.name), self.settings.alive_timeout, self.stop,
                                  failed=lambda: child.popen.poll() is not None)
             if missing and not self.stop.is_set() and child.popen.poll() is None:
                 LOG.warning("%s is not alive after %.0f s; starting the next anyway", child.spec.name,

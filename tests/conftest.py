@@ -32,7 +32,10 @@ def session(router):
 def launch(router, session, log_dir):
     """``launch(name, "key=value", ..., wait=True)`` starts ``python -m balltrack.services.<name>`` with
     those ``--set`` overrides against the test's router, waits for its liveliness token, and at
-    teardown stops every launched service and checks it exited 0."""
+    teardown stops every launched service and checks it exited 0. ``name`` may join several
+    services in one process (``detector+locator``: ``balltrack run``, settings
+    ``service.key=value``); each one's token is waited for."""
+    from balltrack.common.keys import process_services
     from tests.harness import Liveliness, start_service
 
     started = []
@@ -43,7 +46,8 @@ def launch(router, session, log_dir):
         process = start_service(name, router.endpoint, log_dir, *arguments)
         started.append(process)
         if wait:
-            liveliness.wait(name, timeout=40)
+            for service in process_services(name):
+                liveliness.wait(service, timeout=40)
         return process
 
     yield start

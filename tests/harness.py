@@ -15,7 +15,7 @@ from pathlib import Path
 
 import zenoh
 
-from balltrack.common.keys import Keys
+from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import decode, encode
 from balltrack.common.network import free_port  # noqa: F401  (tests import it from here too)
 from balltrack.common.session import open_session
@@ -116,7 +116,9 @@ class Router:
 
 
 def start_service(name: str, endpoint: str, log_dir: Path, *extra: str) -> Process:
-    return Process([sys.executable, "-m", f"balltrack.services.{name}", "--connect", endpoint, *extra],
+    """``name``: a service, or several joined by + in one process (``balltrack run``)."""
+    command = (["-m", "balltrack", "run", name] if PROCESS_JOIN in name else ["-m", f"balltrack.services.{name}"])
+    return Process([sys.executable, *command, "--connect", endpoint, *extra],
                    log_dir / f"{name}-{time.monotonic_ns()}.log")
 
 

@@ -105,5 +105,9 @@ def build(service: ServiceContext):
     return loop
 
 
+# The service's parameters (``balltrack run camera --help`` lists them); ``build`` wires it.
+CONFIG = CameraConfig
+
+
 def main(argv=None) -> int:
-    return run_service("camera", CameraConfig, build, argv, __doc__)
+    return run_service("camera", CONFIG, build, argv, __doc__)

@@ -64,5 +64,9 @@ def build(service: ServiceContext):
     return None
 
 
+# The service's parameters (``balltrack run detector --help`` lists them); ``build`` wires it.
+CONFIG = DetectorConfig
+
+
 def main(argv=None) -> int:
-    return run_service("detector", DetectorConfig, build, argv, __doc__)
+    return run_service("detector", CONFIG, build, argv, __doc__)

@@ -101,5 +101,9 @@ def build(service: ServiceContext):
     return None
 
 
+# The service's parameters (``balltrack run follower --help`` lists them); ``build`` wires it.
+CONFIG = FollowerConfig
+
+
 def main(argv=None) -> int:
-    return run_service("follower", FollowerConfig, build, argv, __doc__)
+    return run_service("follower", CONFIG, build, argv, __doc__)

@@ -61,5 +61,9 @@ def build(service: ServiceContext):
     return None
 
 
+# The service's parameters (``balltrack run locator --help`` lists them); ``build`` wires it.
+CONFIG = LocatorConfig
+
+
 def main(argv=None) -> int:
-    return run_service("locator", LocatorConfig, build, argv, __doc__)
+    return run_service("locator", CONFIG, build, argv, __doc__)

@@ -173,9 +173,13 @@ def rosbags_missing() -> bool:
     return False
 
 
+# The service's parameters (``balltrack run ros2_bridge --help`` lists them); ``build`` wires it.
+CONFIG = Ros2BridgeConfig
+
+
 def main(argv=None) -> int:
     if rosbags_missing():
         print(f"{NAME}: needs the rosbags package for ROS 2 messages: pip install balltrack[ros]",
               file=sys.stderr)
         return 2
-    return run_service(NAME, Ros2BridgeConfig, build, argv, __doc__)
+    return run_service(NAME, CONFIG, build, argv, __doc__)

@@ -229,5 +229,9 @@ def build(service: ServiceContext):
     return loop
 
 
+# The service's parameters (``balltrack run simulator --help`` lists them); ``build`` wires it.
+CONFIG = SimulatorConfig
+
+
 def main(argv=None) -> int:
-    return run_service("simulator", SimulatorConfig, build, argv, __doc__)
+    return run_service("simulator", CONFIG, build, argv, __doc__)

@@ -1,4 +1,5 @@
-"""The demo as the README's first command runs it: five processes, the robot reaches the ball."""
+"""The demo as the README's first command runs it: router, simulator, the detector, locator and
+follower in one process, the recorder; the robot reaches the ball."""
 
 import json
 import subprocess
@@ -37,6 +38,10 @@ def test_demo_reaches_the_ball_and_writes_its_outputs(tmp_path):
     for name in ("video.mp4", "trajectory.png", "velocity.png", "frame.png", "overview.png"):
         assert (run_dir / name).stat().st_size > 1000, name
     assert not list(run_dir.glob("*.pid"))
+    # The three pipeline services ran in one process, each still counted as itself.
+    assert (run_dir / "detector+locator+follower.log").is_file()
+    for name in ("detector", "locator", "follower", "simulator"):
+        assert summary["service_stats"][name]["received"] > 0, name
     # run.mcap, written by the demo's recorder process: complete, with the chase in it.
     info = subprocess.run([sys.executable, "-m", "balltrack", "info", str(run_dir / "run.mcap"), "--json"],
                           cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=60)

@@ -107,6 +107,16 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
+    (["run", "detector+bogus"], "expected SERVICE or SERVICE+SERVICE"),
+    (["run", "detector+detector"], "each once"),
+    (["run", "detector+locator", "--secure", "secure"], "--secure: a secure setup gives each service"),
+    (["run", "detector+locator", "--set", "v_min=3"], "expected SERVICE.KEY=VALUE"),
+    (["run", "detector+locator", "--set", "follower.keep_target=false"], "follower is not among this process's detector, locator"),
+    (["run", "detector+locator", "--set", "locator.bogus=1"], "bogus: unknown parameter"),
+    (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
+    (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
+    (["deploy", "start", "--services", "detector+locator,locator"], "a service may run once"),
+    (["deploy", "start", "--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])
 def test_bad_arguments_give_one_line_and_status_2(arguments, reason):
     result = balltrack(*arguments)

@@ -26,6 +26,24 @@ def test_router_first_and_services_connect_to_it(tmp_path):
     assert info["connect"] == ["tcp/127.0.0.1:7500"] and info["namespace"] == "robot1"
 
 
+def test_services_joined_in_one_process_get_their_files_and_settings_by_name(tmp_path):
+    (tmp_path / "locator.toml").write_text("ball_radius = 0.04\n")
+    specs, info = specs_for("--router", "--listen", "tcp/0.0.0.0:7500", "--config-dir", str(tmp_path),
+                            "--services", "detector+locator,simulator", "--set", "detector.v_min=30",
+                            "--set", "locator.mode=exact", "--set", "simulator.seed=3")
+    assert [spec.name for spec in specs] == ["router", "detector+locator", "simulator"]
+    joined = specs[1].argv
+    assert joined[1:5] == ["-m", "balltrack", "run", "detector+locator"] and "--peer" in joined
+    assert joined[joined.index("--config") + 1] == f"locator={tmp_path / 'locator.toml'}"
+    assert [joined[index + 1] for index, item in enumerate(joined) if item == "--set"] == \
+        ["detector.v_min=30", "locator.mode=exact"]
+    simulator = specs[2].argv
+    assert simulator[simulator.index("--set") + 1] == "seed=3"  # (alone: as before)
+    # Liveliness and status go by service, whichever process runs it.
+    assert info["services"] == ["detector", "locator", "simulator"]
+    assert [spec.wait_alive for spec in specs] == [False, True, False]
+
+
 def test_without_router_services_use_the_given_endpoint_or_the_zenoh_file(tmp_path):
     specs, info = specs_for("--services", "detector", "--connect", "tcp/10.0.0.2:7447")
     assert [spec.name for spec in specs] == ["detector"]
@@ -43,6 +61,10 @@ def test_without_router_services_use_the_given_endpoint_or_the_zenoh_file(tmp_pa
     (["--services", "detector", "--set", "follower.rate_hz=3"], "not among --services"),
     (["--listen", "tcp/0.0.0.0:7447"], "need --router"),
     (["--router", "--listen", "tcp/127.0.0.1:0"], "give a port"),
+    (["--services", "detector+nosuch"], "unknown nosuch"),
+    (["--services", "detector+locator,locator"], "a service may run once"),
+    (["--services", "detector+locator", "--set", "follower.rate_hz=3"], "not among --services"),
+    (["--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])
 def test_bad_options_are_refused(arguments, message):
     with pytest.raises(LaunchError, match=message):
