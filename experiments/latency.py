@@ -123,8 +123,8 @@ def run(options) -> "ExperimentResult":
                   "locator handler p50 (ms)", "frames"], rows,
                  f"Each demo run in the order run (arrival times at the demo's subscriber); the goals "
                  f"read the median of the {len(event)} event-mode run{'s' if len(event) > 1 else ''}. "
-                 f"With the three services in one process, the detector's handler time includes "
-                 f"the locator's and the follower's, which its put of detected_ball calls:")
+                 f"Handler times are each service's own (in one process, the detector's leaves "
+                 f"out the locator's and follower's handlers that its put of detected_ball runs):")
     separate = summaries["separate"]
     result.table(["event mode, median run", "frame -> detected_ball p50 (ms)", "frame -> 3D p50 / p99 (ms)",
                   "frame -> cmd_vel p50 (ms)"],

@@ -166,3 +166,35 @@ def test_sim_clock_starts_at_zero_and_follows_updates():
     assert math.isclose(clock.now(), 1.5) and clock.has_time()
     assert clock.wait_for_update(0, 0.01) == (1, 1_500_000_000)
     assert clock.wait_for_update(1, 0.01) == (1, 1_500_000_000)  # timed out: nothing new
+
+
+def test_a_handlers_time_leaves_out_the_handlers_its_puts_call(monkeypatch):
+    """In one process (``run_services``) the detector's put of a detection runs the locator's
+    handler inside the detector's: each service's p50_ms must be its own time."""
+    import threading
+
+    from balltrack.common import runner
+
+    now = [0.0]
+    monkeypatch.setattr(runner.time, "perf_counter", lambda: now[0])
+    stop = threading.Event()
+    detector = runner.ServiceContext("detector", None, "", object(), stop)
+    locator = runner.ServiceContext("locator", None, "", object(), stop)
+    ball = encode("Ball2D", {"header": header(1, 1), "x": 0.0, "y": 0.0, "z": 0.1, "u": 320.0, "v": 240.0,
+                                "radius_px": 32.0, "image_width": 640, "image_height": 480, "score": 0.9})
+
+    def locate(_message):
+        now[0] += 5.0
+
+    def detect(_message):
+        now[0] += 1.0
+        locator.process("detected_ball", "Ball2D", ball, locate, True)  # (as its put would)
+        now[0] += 2.0
+
+    detector.process("camera/image_raw", "Ball2D", ball, detect, True)
+    assert detector.stats.snapshot(0)["p50_ms"] == 3000.0 and locator.stats.snapshot(0)["p50_ms"] == 5000.0
+    # A handler that fails is rejected and its time not recorded; the next good one counts alone.
+    detector.process("camera/image_raw", "Ball2D", b"\xc1", detect, True)
+    detector.process("camera/image_raw", "Ball2D", ball, lambda _message: now.__setitem__(0, now[0] + 4.0), True)
+    assert detector.stats.snapshot(0)["rejected"] == 1
+    assert sorted(detector.stats._durations) == [3000.0, 4000.0]
