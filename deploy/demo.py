@@ -74,8 +74,10 @@ RECORD_NICE = 10
 
 # The robot's side of the demo in one process: a detection reaches the locator and the
 # follower as a call instead of waking two more processes on two cores. Frame ->
-# detected_ball_3d p50 3.0, 3.1 and 3.0 ms against 3.6, 3.6 and 3.9 in separate processes,
-# frame -> cmd_vel 3.3, 3.5 and 3.4 against 3.6, 3.5 and 3.9 (event mode, demos alternated).
+# detected_ball_3d p50 3.0, 3.1 and 3.0 ms against 3.6, 3.6 and 3.9 in separate processes
+# (event mode, demos alternated); 3.4, 3.2 and 3.3 against 3.8, 3.6 and 3.7 in `balltrack
+# experiment latency` (frame -> cmd_vel there 3.7 either way: joined, the follower's handler
+# follows the locator's on one thread).
 JOINED = ("detector+locator+follower", "simulator")
 
 
