@@ -19,6 +19,11 @@ def process_services(process: str) -> list[str]:
     """The services of a process name: ``detector+locator`` -> ``["detector", "locator"]``."""
     return process.split(PROCESS_JOIN)
 
+
+def services_of(processes) -> list[str]:
+    """Every service of ``processes`` (names as ``process_services`` reads them), in order."""
+    return [name for process in processes for name in process_services(process)]
+
 IMAGE_RAW = "camera/image_raw"
 CAMERA_INFO = "camera/camera_info"
 DETECTED_BALL = "detected_ball"

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from balltrack.common.arguments import number
 from balltrack.common.config import ConfigError, settings_by_service
-from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services
+from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
 from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, close_session,
                                       default_endpoints, load_config_file, secure_client_path,
                                       secure_router_path)
@@ -67,8 +67,7 @@ def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, 
     """``--set SERVICE.KEY=VALUE`` items per service of ``services`` (processes: a name may
     join several, ``detector+locator``), as ``KEY=VALUE``."""
     try:
-        return settings_by_service(items, [name for process in services for name in process_services(process)],
-                                   "--services")
+        return settings_by_service(items, services_of(services), "--services")
     except ConfigError as error:
         raise LaunchError(str(error)) from None
 
@@ -76,7 +75,7 @@ def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, 
 def build_specs(args) -> tuple[list[ChildSpec], dict]:
     """The children (router first) and the facts ``status`` needs, from ``start``'s options."""
     services = [name.strip() for name in args.services.split(",") if name.strip()]
-    names = [name for process in services for name in process_services(process)]
+    names = services_of(services)
     unknown = [name for name in names if name not in SERVICES]
     if unknown:
         raise LaunchError(f"--services: unknown {', '.join(unknown)} (known: {', '.join(SERVICES)})")
@@ -189,7 +188,7 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
         specs.append(ChildSpec(process, argv, wait_alive=router and process != services[-1]))
     # (the services themselves, each with its liveliness token, whichever process runs it)
     info = {"connect": connect, "namespace": namespace,
-            "services": [name for process in services for name in process_services(process)],
+            "services": services_of(services),
             "zenoh_config": absolute(zenoh_config), "router": bool(router), "secure": absolute(secure)}
     return specs, info
 

@@ -19,7 +19,7 @@ import signal
 import sys
 from pathlib import Path
 
-from balltrack.common.keys import process_services
+from balltrack.common.keys import services_of
 from balltrack.common.network import free_port
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.cli import LaunchError, Launched, launch, make_specs, read_pid, read_status, tail
@@ -94,7 +94,7 @@ def start_system(run_dir: Path | str, services: tuple[str, ...] = SERVICES,
     and the ends of the logs in the message) if a process fails or is not alive in ``wait`` s,
     ValueError for a bad namespace."""
     endpoint = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port(port)}"
-    unknown = set(settings or {}) - {name for process in services for name in process_services(process)}
+    unknown = set(settings or {}) - set(services_of(services))
     if unknown:
         raise LaunchError(f"settings for {', '.join(sorted(unknown))}, which is not among the services")
     specs, info = make_specs(list(services), {name: list(values) for name, values in (settings or {}).items()},

@@ -31,6 +31,12 @@ def command_run(args) -> int:
     modules = [importlib.import_module(f"balltrack.services.{name}.service") for name in names]
     if len(modules) == 1:
         return modules[0].main(args.arguments)
+    # (a service that cannot run on this machine says why, as its own main does)
+    for name, module in zip(names, modules):
+        reason = module.unavailable() if hasattr(module, "unavailable") else None
+        if reason:
+            print(f"balltrack run: {name}: {reason}", file=sys.stderr)
+            return 2
     from balltrack.common.runner import run_services
 
     return run_services([(name, module.CONFIG, module.build) for name, module in zip(names, modules)],

@@ -173,13 +173,21 @@ def rosbags_missing() -> bool:
     return False
 
 
+def unavailable() -> str | None:
+    """Why this service cannot run here (one line), or None; checked before any session opens,
+    alone (``main``) or joined with others (``balltrack run A+B``)."""
+    if rosbags_missing():
+        return "needs the rosbags package for ROS 2 messages: pip install balltrack[ros]"
+    return None
+
+
 # The service's parameters (``balltrack run ros2_bridge --help`` lists them); ``build`` wires it.
 CONFIG = Ros2BridgeConfig
 
 
 def main(argv=None) -> int:
-    if rosbags_missing():
-        print(f"{NAME}: needs the rosbags package for ROS 2 messages: pip install balltrack[ros]",
-              file=sys.stderr)
+    reason = unavailable()
+    if reason:
+        print(f"{NAME}: {reason}", file=sys.stderr)
         return 2
     return run_service(NAME, CONFIG, build, argv, __doc__)

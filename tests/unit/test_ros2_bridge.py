@@ -238,3 +238,19 @@ def test_without_rosbags_the_service_exits_2_naming_the_extra():
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "pip install balltrack[ros]" in lines[0], result.stderr
+
+
+def test_a_joined_process_says_when_the_bridge_cannot_run_here(monkeypatch, capsys):
+    """Without rosbags the bridge exits 2 with one line alone (its main) and joined with other
+    services (``balltrack run A+B``), before any session opens."""
+    import argparse
+
+    from balltrack.cli.run import command_run
+    from balltrack.services.ros2_bridge import service
+
+    monkeypatch.setattr(service, "rosbags_missing", lambda: True)
+    status = command_run(argparse.Namespace(service="locator+ros2_bridge", arguments=[]))
+    error = capsys.readouterr().err
+    assert status == 2 and error.splitlines() == [
+        "balltrack run: ros2_bridge: needs the rosbags package for ROS 2 messages: pip install balltrack[ros]"]
+    assert service.main([]) == 2 and "pip install balltrack[ros]" in capsys.readouterr().err
