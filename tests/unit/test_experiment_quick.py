@@ -9,6 +9,7 @@ import os
 import platform
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -176,3 +177,19 @@ def test_detector_speed_splits_the_same_calls_by_photo_set(monkeypatch):
                                                      "cpu_p50_ms": pytest.approx(40), "cpu_p90_ms": pytest.approx(40)}
     assert detector_speed.photo_set_name(Path("/d"), Path("/d/set1/x/a.jpg")) == "set1"
     assert detector_speed.photo_set_name(Path("/d/set1"), Path("/d/set1/a.jpg")) == "set1"
+
+
+@pytest.mark.parametrize("height, width", [(1280, 960), (960, 1280), (360, 640), (1080, 1920), (480, 640), (600, 600)])
+def test_photos_become_camera_frames_with_nothing_stretched(height, width):
+    # A disc in the photo's middle, drawn as a ball: it must stay round in the 640x480 frame,
+    # whatever the photo's shape (portrait photos are turned, wider ones cut, not squeezed).
+    from balltrack.experiments.detector_speed import camera_frame
+
+    photo = np.zeros((height, width, 3), np.uint8)
+    radius = min(height, width) // 8
+    cv2.circle(photo, (width // 2, height // 2), radius, (40, 200, 180), -1)
+    frame = camera_frame(photo)
+    assert frame.shape == (480, 640, 3)
+    _, _, disc_width, disc_height = cv2.boundingRect(cv2.inRange(frame, (20, 100, 90), (60, 255, 255)))
+    assert disc_width > 20
+    assert abs(disc_width - disc_height) <= 2
