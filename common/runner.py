@@ -6,7 +6,8 @@ line), opens the session, declares the liveliness token ``alive/<service>``, pub
 ``{"describe": true}`` for their declarations), and stops on SIGINT/SIGTERM by setting one
 event, closing the session explicitly, exit 0.
 
-A service module only says what it subscribes to and publishes::
+A service module only says what it subscribes to and publishes, through the
+``ServiceContext`` (``context.py``) its ``build`` is given::
 
     def build(service: ServiceContext):
         out = service.publisher(keys.DETECTED_BALL_3D, "Ball3D")
@@ -17,22 +18,17 @@ A service module only says what it subscribes to and publishes::
 """
 
 import argparse
-import collections
 import logging
 import os
 import sys
 import threading
 import time
-import traceback
 from typing import Any, Callable
 
-import numpy as np
-import zenoh
-
 from balltrack.common import keys as key_table
-from balltrack.common.clock import SimClock, TimerTicks, WallClock
 from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
-                                     replace_config, settings_by_service)
+                                     settings_by_service)
+from balltrack.common.context import ServiceContext
 from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (ArgumentParser, SessionOpenError, add_session_arguments, close_session,
@@ -40,285 +36,6 @@ from balltrack.common.session import (ArgumentParser, SessionOpenError, add_sess
 from balltrack.common.shutdown import stop_on_signals
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
-# Samples Zenoh holds for ``subscribe_latest``'s worker while it is busy (RingChannel: when
-# full, the oldest goes, uncounted): a call would have to last as long as this many frames of
-# the camera (0.27 s at 30 Hz) to lose one from ``dropped``. The worker's direct wake-up served
-# frames ~0.2 ms sooner than a hand-over from a callback (demo, frame -> detected_ball p50 3.7
-# and 3.7 ms against 3.9 and 3.9, two runs each).
-LATEST_RING = 8
-# Seconds spent, on this thread, in handlers that the current handler's puts called: with
-# several services in one process a put runs a subscriber of the same session at once, and
-# each service's processing time is its own (ServiceContext.process).
-_NESTED = threading.local()
-
-
-class RateLimitedLog:
-    """Logs a (key, kind) at most once per ``period`` seconds, counting what it held back."""
-
-    # Kinds come from peers' payloads: past this many, every new kind shares one slot per key,
-    # so neither the table nor the log grows with what a fuzzer sends.
-    MAX_KINDS = 256
-
-    def __init__(self, logger: logging.Logger, period: float = 5.0):
-        self.logger = logger
-        self.period = period
-        self._last: dict[tuple, float] = {}
-        self._suppressed: collections.Counter = collections.Counter()
-        self._lock = threading.Lock()
-
-    def warning(self, key: str, reason: str, what: str = "rejected message") -> None:
-        kind = (key, shorten(reason.split(":")[0], 40))
-        now = time.monotonic()
-        with self._lock:
-            if kind not in self._last and len(self._last) >= self.MAX_KINDS:
-                kind = (key, "other")
-            if now - self._last.get(kind, -1e9) < self.period:
-                self._suppressed[kind] += 1
-                return
-            self._last[kind] = now
-            held_back = self._suppressed.pop(kind, 0)
-        suffix = f" ({held_back} similar suppressed)" if held_back else ""
-        self.logger.warning("%s on %s: %s%s", what, key, shorten(reason, 300), suffix)
-
-
-class Stats:
-    """Counters and processing-time percentiles for ``<service>/stats``."""
-
-    def __init__(self, service: str):
-        self.service = service
-        self.received = self.published = self.rejected = self.dropped = 0
-        self._durations = collections.deque(maxlen=1000)
-        self._lock = threading.Lock()
-        # A service's own figures, added to every snapshot (the Stats schema allows extra fields).
-        self.extra: Callable[[], dict] | None = None
-
-    def count(self, field: str, amount: int = 1) -> None:
-        with self._lock:
-            setattr(self, field, getattr(self, field) + amount)
-
-    def record_duration(self, seconds: float) -> None:
-        with self._lock:
-            self._durations.append(seconds * 1000.0)
-
-    def snapshot(self, stamp_ns: int) -> dict:
-        with self._lock:
-            durations = np.array(self._durations) if self._durations else np.zeros(1)
-            figures = {"service": self.service, "stamp": int(stamp_ns),
-                       "received": self.received, "published": self.published,
-                       "rejected": self.rejected, "dropped": self.dropped,
-                       "p50_ms": float(np.percentile(durations, 50)),
-                       "p99_ms": float(np.percentile(durations, 99))}
-        return {**figures, **(self.extra() if self.extra else {})}
-
-
-class Publisher:
-    """Validates, encodes and counts; ``wanted`` tells whether anyone subscribes."""
-
-    def __init__(self, context: "ServiceContext", key: str, message: str, **options):
-        self._context = context
-        self.key = context.keys(key)
-        self.message = message
-        self._publisher = context.session.declare_publisher(self.key, **options)
-
-    @property
-    def wanted(self) -> bool:
-        return self._publisher.matching_status.matching
-
-    def put(self, message: dict) -> None:
-        self._publisher.put(encode(self.message, message))
-        self._context.stats.count("published")
-
-
-def in_order(callback: Callable) -> "zenoh.handlers.Callback":
-    """Run a subscriber callback on Zenoh's network thread, so one service's callbacks run one
-    at a time in arrival order. (zenoh-python's default gives each subscriber its own thread:
-    a ``clock`` could then overtake the ``detected_ball`` the router sent before it, and a
-    lockstep simulation would not be reproducible.) Callbacks must therefore be short."""
-    return zenoh.handlers.Callback(callback, indirect=False)
-
-
-class ServiceContext:
-    """What a service's ``build`` function uses: session, keys, config, stats, clock, stop."""
-
-    def __init__(self, name: str, session, namespace: str, config,
-                 stop: threading.Event | None = None):
-        self.name = name
-        self.session = session
-        self.keys = Keys(namespace)
-        self.stats = Stats(name)
-        self.stop = stop or threading.Event()
-        self.log = logging.getLogger(name)
-        self.rejections = RateLimitedLog(self.log)
-        self._config = config
-        self._config_listeners: list[Callable[[Any], None]] = []
-        self._declared: list = []
-        # Subscribers whose worker waits in their ``recv``: undeclared to let it return.
-        self._waited_on: list = []
-        self._threads: list[threading.Thread] = []
-        self.clock = SimClock() if getattr(config, "use_sim_time", False) else WallClock()
-        if isinstance(self.clock, SimClock):
-            self.subscribe(key_table.CLOCK, "Clock", lambda tick: self.clock.update(tick["stamp"]),
-                           count=False)
-
-    @property
-    def config(self):
-        return self._config
-
-    def on_config_change(self, listener: Callable[[Any], None]) -> None:
-        self._config_listeners.append(listener)
-
-    def set_config(self, changes: dict) -> Any:
-        new_config = replace_config(self._config, changes)
-        if getattr(new_config, "use_sim_time", None) != getattr(self._config, "use_sim_time", None):
-            raise ConfigError("use_sim_time: can only be set at start")
-        self._config = new_config
-        for listener in self._config_listeners:
-            listener(new_config)
-        return new_config
-
-    def publisher(self, key: str, message: str, **options) -> Publisher:
-        publisher = Publisher(self, key, message, **options)
-        self._declared.append(publisher._publisher)
-        return publisher
-
-    def queryable(self, key: str, handler: Callable) -> None:
-        """Answer queries on ``key`` (namespaced) with ``handler(query)`` until shutdown."""
-        self._declared.append(self.session.declare_queryable(self.keys(key), handler))
-
-    def reject(self, key: str, reason: str) -> None:
-        self.stats.count("rejected")
-        self.rejections.warning(key, reason)
-
-    def process(self, key: str, message_name: str, payload: bytes, handler, count: bool) -> None:
-        """Decode, validate and handle one message; a bad one is rejected (counted, logged).
-        The handling time recorded is this service's own: without that of other services'
-        handlers that its puts called in this process (``run_services``)."""
-        started = time.perf_counter()
-        outer_nested = getattr(_NESTED, "seconds", 0.0)
-        _NESTED.seconds = 0.0
-        try:
-            try:
-                message = decode(message_name, payload)
-                handler(message)
-            except MessageError as error:
-                self.reject(key, str(error))
-                return
-            except Exception as error:  # a bug must not kill the service; it is logged loudly
-                self.reject(key, f"internal error: {shorten(error)}")
-                self.log.debug("%s", traceback.format_exc())
-                return
-            if count:
-                self.stats.record_duration(time.perf_counter() - started - _NESTED.seconds)
-        finally:
-            # (to the handler that called this one, all of this call is nested time)
-            _NESTED.seconds = outer_nested + time.perf_counter() - started
-
-    def subscribe(self, key: str, message_name: str, handler: Callable[[dict], None],
-                  count: bool = True):
-        """Decode each sample on ``key`` as ``message_name`` and call ``handler`` in order;
-        returns the subscriber, for ``unsubscribe``."""
-        full_key = self.keys(key)
-
-        def on_sample(sample):
-            if count:
-                self.stats.count("received")
-            self.process(full_key, message_name, sample.payload.to_bytes(), handler, count)
-
-        subscriber = self.session.declare_subscriber(full_key, in_order(on_sample))
-        self._declared.append(subscriber)
-        return subscriber
-
-    def unsubscribe(self, subscriber) -> None:
-        """Undeclare a subscriber that ``subscribe`` returned."""
-        self._declared.remove(subscriber)
-        subscriber.undeclare()
-
-    def subscribe_latest(self, key: str, message_name: str, handler: Callable[[dict], None]) -> None:
-        """Like ``subscribe`` but a worker thread serves only the newest sample: under
-        overload stale samples are dropped (counted in ``dropped``), never queued.
-
-        Zenoh keeps what arrives while the worker is busy in a ring of LATEST_RING samples; the
-        worker takes them all, serves the newest and counts the others as dropped. It waits
-        in Zenoh's own ``recv``, which wakes it directly. (Before, a callback on Zenoh's thread
-        handed each sample to it through a ``threading.Condition``: the worker then woke
-        only to wait again until that thread let go of the GIL, and served a frame ~0.2 ms
-        later, see LATEST_RING.)
-        """
-        full_key = self.keys(key)
-        subscriber = self.session.declare_subscriber(full_key, zenoh.handlers.RingChannel(LATEST_RING))
-        self._declared.append(subscriber)
-        self._waited_on.append(subscriber)
-        samples = subscriber.handler
-
-        def worker():
-            while True:
-                try:
-                    sample = samples.recv()
-                except zenoh.ZError:  # the subscriber was undeclared: the service stops
-                    return
-                arrived = 1
-                while (newer := samples.try_recv()) is not None:
-                    sample, arrived = newer, arrived + 1
-                self.stats.count("received", arrived)
-                if arrived > 1:
-                    self.stats.count("dropped", arrived - 1)
-                self.process(full_key, message_name, sample.payload.to_bytes(), handler, True)
-
-        self.start_thread(worker, f"{self.name}-{key}")
-
-    def start_thread(self, target: Callable[[], None], name: str) -> None:
-        """A worker that must return soon after ``stop`` is set; joined before the session closes
-        (a thread still inside native code at interpreter exit aborts the process)."""
-        thread = threading.Thread(target=target, name=name, daemon=True)
-        self._threads.append(thread)
-        thread.start()
-
-    def release_waiting(self) -> None:
-        """Undeclare the subscribers whose workers wait in their ``recv`` (``subscribe_latest``):
-        the wait ends with an error, and the worker returns once done with a sample in hand."""
-        for subscriber in self._waited_on:
-            self._declared.remove(subscriber)
-            try:
-                subscriber.undeclare()
-            except Exception:  # (as for every entity at stop; closing the session ends the wait then)
-                pass
-        self._waited_on.clear()
-
-    def join_threads(self, timeout: float = 5.0) -> None:
-        deadline = time.monotonic() + timeout
-        for thread in self._threads:
-            thread.join(max(0.0, deadline - time.monotonic()))
-
-    def every(self, period: Callable[[], float], callback: Callable[[], None]) -> None:
-        """Call ``callback`` every ``period()`` seconds of the service's clock, in a thread.
-
-        On simulated time the ticks fall on whole multiples of the period and happen when a
-        ``clock`` message crosses one, so a lockstep simulator knows which frames owe a tick."""
-
-        def run(callback):
-            try:
-                callback()
-            except Exception:
-                self.log.error("timer callback failed:\n%s", traceback.format_exc())
-
-        def sim_loop():
-            seen_updates, ticks = 0, TimerTicks()
-            while not self.stop.is_set():
-                updates, now_ns = self.clock.wait_for_update(seen_updates, 0.2)
-                if updates != seen_updates:
-                    seen_updates = updates
-                    if ticks.fires(now_ns, period()):
-                        run(callback)
-
-        def wall_loop():
-            next_tick = time.monotonic()
-            while not self.stop.is_set():
-                run(callback)
-                next_tick = max(next_tick + period(), time.monotonic() - period())
-                self.stop.wait(max(0.0, next_tick - time.monotonic()))
-
-        loop = sim_loop if isinstance(self.clock, SimClock) else wall_loop
-        self.start_thread(loop, f"{self.name}-timer")
 
 
 def _serve_config(context: ServiceContext, query) -> None:

@@ -24,7 +24,8 @@ from balltrack.common.config import ConfigError
 from balltrack.common.images import bgr_to_message
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.messages import MessageError, encode, header
-from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.context import ServiceContext
+from balltrack.common.runner import run_service
 from balltrack.services.camera.calibration import CameraModel, pinhole, read_calibration
 from balltrack.services.camera.config import LIVE_SETTINGS, CameraConfig
 from balltrack.services.camera.source import FrameFeed, SourceError, open_source

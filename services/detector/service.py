@@ -14,7 +14,8 @@ Example:
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.memory import keep_freed_memory
-from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.context import ServiceContext
+from balltrack.common.runner import run_service
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, compile_kernels

@@ -18,7 +18,8 @@ import threading
 
 from balltrack.common import keys
 from balltrack.common.messages import MessageError
-from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.context import ServiceContext
+from balltrack.common.runner import run_service
 from balltrack.services.follower.config import FollowerConfig
 from balltrack.services.follower.controller import SEARCH, FollowerController
 

@@ -11,7 +11,8 @@ Example:
 
 from balltrack.common import keys
 from balltrack.common.messages import MessageError
-from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.context import ServiceContext
+from balltrack.common.runner import run_service
 from balltrack.services.locator.config import LocatorConfig
 from balltrack.common.pinhole import Intrinsics
 from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful

@@ -21,7 +21,8 @@ from typing import Callable
 
 from balltrack.common import keys
 from balltrack.common.messages import MessageError, shorten
-from balltrack.common.runner import ServiceContext, in_order, run_service
+from balltrack.common.context import ServiceContext, in_order
+from balltrack.common.runner import run_service
 from balltrack.services.ros2_bridge.config import Ros2BridgeConfig
 
 NAME = "ros2_bridge"

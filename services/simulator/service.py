@@ -36,7 +36,8 @@ from balltrack.common.images import bgr_to_message
 from balltrack.common.config import ConfigError
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.messages import MessageError, decode, encode, header, shorten
-from balltrack.common.runner import ServiceContext, run_service
+from balltrack.common.context import ServiceContext
+from balltrack.common.runner import run_service
 from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate

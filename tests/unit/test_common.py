@@ -173,13 +173,13 @@ def test_a_handlers_time_leaves_out_the_handlers_its_puts_call(monkeypatch):
     handler inside the detector's: each service's p50_ms must be its own time."""
     import threading
 
-    from balltrack.common import runner
+    from balltrack.common import context
 
     now = [0.0]
-    monkeypatch.setattr(runner.time, "perf_counter", lambda: now[0])
+    monkeypatch.setattr(context.time, "perf_counter", lambda: now[0])
     stop = threading.Event()
-    detector = runner.ServiceContext("detector", None, "", object(), stop)
-    locator = runner.ServiceContext("locator", None, "", object(), stop)
+    detector = context.ServiceContext("detector", None, "", object(), stop)
+    locator = context.ServiceContext("locator", None, "", object(), stop)
     ball = encode("Ball2D", {"header": header(1, 1), "x": 0.0, "y": 0.0, "z": 0.1, "u": 320.0, "v": 240.0,
                                 "radius_px": 32.0, "image_width": 640, "image_height": 480, "score": 0.9})
 
