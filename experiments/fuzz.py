@@ -269,10 +269,14 @@ def _campaign(result, system, session, rng, per_key, data_keys, query_keys, opti
     commands = Watch(session, keys.CMD_VEL, "Twist")
     truths = Watch(session, keys.GROUND_TRUTH, "GroundTruth")
     # A real rendered frame that the detector finds the ball in: the valid frame of the checks.
-    detected = detections.wait(lambda ball: True, 60)
-    frame = frames.wait(lambda image: detected and image["header"]["seq"] == detected["header"]["seq"], 10)
+    # (Any detection whose frame is still among the kept ones: the first detections come when
+    # the detector has warmed up, and their frames may be older than the kept 20 by then.
+    # Frames keep arriving, so the wait looks again at each.)
+    frame = frames.wait(lambda image: any(ball["header"]["seq"] == image["header"]["seq"]
+                                          for ball in detections.messages), 60)
     if frame is None:
-        raise RuntimeError("no simulator frame with a detection within 60 s")
+        raise RuntimeError("no simulator frame with a detection within 60 s"
+                           f" ({len(detections.messages)} detections, none of a kept frame)")
     configs = {service: read_config(session, service) for service in SERVICES}
     if any(config is None for config in configs.values()):
         raise RuntimeError(f"a service does not answer its config: {configs}")
