@@ -2,12 +2,13 @@
 
 Both run on the same frames in one run, calls alternating (plain, balltrack, plain, ...) so
 that whatever else loads the machine loads both alike: simulator renders (chase, multi,
-distractors scenarios) and real photos made 640x480 frames as a 4:3 camera would see them
-(``camera_frame``: every folder of ``--photos``, by default /work/shared/data when it exists). Wall and CPU time per call, median and 90th
-percentile, the cores called directly (no transport). OpenCV runs single-threaded
-(``cv2.setNumThreads(1)``, ``--threads`` to change it): the goal of issue 9 is a balltrack
-detector twice as fast as the plain pipeline on one thread, ratio (wall p50) = plain / balltrack
->= 2, and on this 2-core machine OpenCV's own threads would share the cores with everything else.
+distractors scenarios) and real photos made the 640x480 frames a 4:3 camera would give
+(``camera_frame``; every folder of ``--photos``, by default /work/shared/data when it exists).
+Wall and CPU time per call, median and 90th percentile, the cores called directly (no
+transport). OpenCV runs single-threaded (``cv2.setNumThreads(1)``, ``--threads`` to change
+it): the goal of issue 9 is a balltrack detector twice as fast as the plain pipeline on one
+thread, ratio (wall p50) = plain / balltrack >= 2, and on this 2-core machine OpenCV's own
+threads would share the cores with everything else.
 The photos' calls are also split by set (each folder of ``--photos``): no goal reads those.
 
 The plain pipeline is the paper's (section 2.2): Gaussian blur 5, HSV, CLAHE on V, ``inRange``
