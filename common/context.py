@@ -269,6 +269,23 @@ class ServiceContext:
         for thread in self._threads:
             thread.join(max(0.0, deadline - time.monotonic()))
 
+    def declare(self, entity):
+        """Keep a Zenoh entity the service declared itself (a publisher it encodes for), to be
+        undeclared by ``close``; returns it."""
+        self._declared.append(entity)
+        return entity
+
+    def close(self) -> None:
+        """Once ``stop`` is set: let waiting workers return, join every thread, then undeclare
+        every entity, newest first (errors ignored: the session closes next anyway)."""
+        self.release_waiting()
+        self.join_threads()
+        for entity in reversed(self._declared):
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+
     def every(self, period: Callable[[], float], callback: Callable[[], None]) -> None:
         """Call ``callback`` every ``period()`` seconds of the service's clock, in a thread.
 

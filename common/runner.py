@@ -192,13 +192,7 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
     finally:
         stop.set()
         for context in reversed(contexts):
-            context.release_waiting()
-            context.join_threads()
-            for entity in reversed(context._declared):
-                try:
-                    entity.undeclare()
-                except Exception:
-                    pass
+            context.close()
         reason = close_session(session)
         if reason:
             logging.getLogger(label).warning("%s", reason)
@@ -211,10 +205,8 @@ def _announce(context: ServiceContext):
     """Publish a built service's stats at 1 Hz, answer its config queries and declare it
     alive; returns its liveliness token."""
     name = context.name
-    stats_publisher = context.session.declare_publisher(context.keys(key_table.stats_key(name)))
-    context._declared.append(stats_publisher)
-    context._declared.append(context.session.declare_queryable(
-        context.keys(key_table.config_key(name)), lambda query: _serve_config(context, query)))
+    stats_publisher = context.declare(context.session.declare_publisher(context.keys(key_table.stats_key(name))))
+    context.queryable(key_table.config_key(name), lambda query: _serve_config(context, query))
     token = context.session.liveliness().declare_token(context.keys(key_table.alive_key(name)))
 
     def publish_stats():
