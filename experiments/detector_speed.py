@@ -21,7 +21,8 @@ the caches gone cold, which the demo's latency is made of. No goal reads it.
 
 It then splits the balltrack detector's time by stage (``BallDetector.stage_times``): colour
 mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
-the ones its p50 reads.
+the ones its p50 reads; and the plain pipeline's, into its colour mask and its Hough transform
+(on the photos the mask is most of it, and the goal leaves the balltrack detector half of it).
 
 Example::
 
@@ -53,6 +54,11 @@ FRAME_SIZE = (640, 480)
 PACED_PAUSE = 1.0 / 30.0
 
 
+# The plain pipeline's stages, as ``PlainDetector.stage_times`` adds them up: the colour mask
+# (blur, HSV, CLAHE, inRange) and the Hough transform on it.
+PLAIN_STAGES = ("colour mask", "Hough")
+
+
 class PlainDetector:
     """The paper's pipeline without this project's checks, for comparison only."""
 
@@ -60,9 +66,13 @@ class PlainDetector:
         self.config = config
         self._clahe = cv2.createCLAHE(clipLimit=config.clahe_clip_limit or 2.0,
                                       tileGridSize=(config.clahe_tile_grid, config.clahe_tile_grid))
+        # When a dict, each call adds the seconds it spent in each of PLAIN_STAGES (as
+        # BallDetector.stage_times).
+        self.stage_times: dict[str, float] | None = None
 
     def detect(self, image_bgr: np.ndarray) -> list[tuple[float, float, float]]:
         config = self.config
+        started = time.perf_counter()
         blurred = cv2.GaussianBlur(image_bgr, (5, 5), 0)
         hsv = cv2.cvtColor(blurred, cv2.COLOR_BGR2HSV)
         hue, saturation, value = cv2.split(hsv)
@@ -71,9 +81,13 @@ class PlainDetector:
                            (config.h_min, config.s_min, config.v_min),
                            (config.h_max, config.s_max, config.v_max))
         max_radius = config.max_radius or min(mask.shape) // 2
+        masked = time.perf_counter()
         circles = cv2.HoughCircles(mask, cv2.HOUGH_GRADIENT, dp=config.dp, minDist=config.min_dist,
                                    param1=config.param1, param2=config.param2,
                                    minRadius=config.min_radius, maxRadius=max_radius)
+        if self.stage_times is not None:
+            for stage, seconds in zip(PLAIN_STAGES, (masked - started, time.perf_counter() - masked)):
+                self.stage_times[stage] = self.stage_times.get(stage, 0.0) + seconds
         return [] if circles is None else [tuple(map(float, circle)) for circle in circles[0]]
 
 
@@ -191,12 +205,14 @@ SPEED_HEADERS = ["frames", "count", "plain p50 / p90 (ms)", "balltrack p50 / p90
 TITLE = "Detector speed against the paper's plain pipeline"
 
 
-def stage_breakdown(detector: BallDetector, frames: list[np.ndarray], passes: int = 3) -> dict[str, dict[str, float]]:
-    """Where the balltrack detector's time goes: per stage of ``STAGES``, its mean ms per
-    frame over every frame (``all``) and over the middle fifth of the frames by their total
-    time (``middle``: the frames a p50 reads). ``passes`` passes over the frames in turn (a
-    frame again at once would find its data in the caches), each frame's call of median total
-    time; one detector alone (this splits the time, the ratio is measured apart)."""
+def stage_breakdown(detector: BallDetector | PlainDetector, frames: list[np.ndarray], passes: int = 3,
+                    stages: tuple[str, ...] = STAGES) -> dict[str, dict[str, float]]:
+    """Where a detector's time goes: per stage of ``stages`` (those its ``stage_times`` adds
+    up), its mean ms per frame over every frame (``all``) and over the middle fifth of the
+    frames by their total time (``middle``: the frames a p50 reads). ``passes`` passes over the
+    frames in turn (a frame again at once would find its data in the caches), each frame's call
+    of median total time; one detector alone (this splits the time, the ratio is measured
+    apart)."""
     calls: list[list[tuple[float, dict[str, float]]]] = [[] for _ in frames]
     try:
         for _ in range(passes):
@@ -214,13 +230,14 @@ def stage_breakdown(detector: BallDetector, frames: list[np.ndarray], passes: in
     def mean_ms(group, stage: str) -> float:
         return 1000 * sum(times.get(stage, 0.0) for _, times in group) / len(group)
 
-    return {stage: {"all": mean_ms(per_frame, stage), "middle": mean_ms(middle, stage)} for stage in STAGES}
+    return {stage: {"all": mean_ms(per_frame, stage), "middle": mean_ms(middle, stage)} for stage in stages}
 
 
-def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]]) -> list[list[str]]:
+def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]],
+                   stages: tuple[str, ...] = STAGES) -> list[list[str]]:
     """Table rows (stage, then per set: all frames, middle fifth) of ``stage_breakdown``s."""
     rows = []
-    for stage in (*STAGES, "total"):
+    for stage in (*stages, "total"):
         row = [stage]
         for stages in breakdowns.values():
             for group in ("all", "middle"):
@@ -266,7 +283,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
         if photos is not None and (named := named_photo_frames(photos)):
             sets["photos"] = [frame for _, frame in named]
             groups["photos"] = [photo_set_name(photos, path) for path, _ in named]
-        rows, paced_rows, set_rows, breakdowns = [], [], [], {}
+        rows, paced_rows, set_rows, breakdowns, plain_breakdowns = [], [], [], {}, {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats, groups=groups[name])
             by_group = measured.pop("by_group", {})
@@ -286,9 +303,13 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                 paced_rows.append(recorded(result, "renders_paced", len(frames), paced,
                                            f"renders, one call per {1000 * PACED_PAUSE:.0f} ms")[0])
             breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
+            plain_breakdowns[name] = stage_breakdown(detectors["plain"], frames, passes, PLAIN_STAGES)
             for stage, times in breakdowns[name].items():
                 result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
                 result.figure(f"{name}/stage/{stage}/middle_ms", times["middle"])
+            for stage, times in plain_breakdowns[name].items():
+                result.figure(f"{name}/plain_stage/{stage}/all_ms", times["all"])
+                result.figure(f"{name}/plain_stage/{stage}/middle_ms", times["middle"])
         result.table(SPEED_HEADERS, rows + paced_rows,
                      f"Calls alternating on the same frames, in whole passes over each set "
                      f"({', '.join(f'{calls_for(repeats, len(frames))} on the {name}' for name, frames in sets.items())}, "
@@ -308,6 +329,12 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      "over the frames, each frame's median call; middle fifth = the frames "
                      "nearest its median, which the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, "
                      "acceptance = 7, outline = 8-9 (see services/detector/detector.py):")
+        result.table(["stage", *(f"{name}: {group}" for name in plain_breakdowns
+                                 for group in ("all frames", "middle fifth"))],
+                     breakdown_rows(plain_breakdowns, PLAIN_STAGES),
+                     "The same for the plain pipeline: its colour mask (blur, HSV, CLAHE, inRange) "
+                     "and its Hough transform. The goal leaves the balltrack detector half the "
+                     "plain pipeline's time for all its stages:")
         result.settings = {"photos": (f"{photos}, each made a 640x480 frame of a landscape 4:3 camera "
                                       "(portrait turned, wider cut, nothing stretched)") if "photos" in sets else "none",
                            "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}

@@ -113,10 +113,31 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
         assert figures[f"detector_speed/renders/stage/{stage}/all_ms"] > 0
         assert figures[f"detector_speed/renders/stage/{stage}/middle_ms"] >= 0
     assert "Where the balltrack detector's time goes" in report
+    # and the plain pipeline's: its colour mask and its Hough transform
+    from balltrack.experiments.detector_speed import PLAIN_STAGES
+    for stage in PLAIN_STAGES:
+        assert figures[f"detector_speed/renders/plain_stage/{stage}/all_ms"] > 0
+    assert "The same for the plain pipeline" in report
     goals = {goal["name"]: goal for goal in results["goals"]}
     assert set(goals) == {f"detector_speed/{name}" for name in sets}
     for name in sets:
         assert goals[f"detector_speed/{name}"]["passed"] == (figures[f"detector_speed/{name}/ratio"] >= 2.0)
+
+
+def test_plain_pipeline_splits_its_calls_into_mask_and_hough():
+    from balltrack.experiments.detector_speed import PLAIN_STAGES, PlainDetector
+    from balltrack.services.detector.config import DetectorConfig
+
+    frame = np.full((240, 320, 3), (70, 80, 90), np.uint8)
+    cv2.circle(frame, (160, 120), 30, (40, 200, 180), -1)
+    plain = PlainDetector(DetectorConfig())
+    plain.detect(frame)
+    assert plain.stage_times is None  # (not profiling: nothing recorded)
+    plain.stage_times = {}
+    for _ in range(2):
+        plain.detect(frame)
+    assert set(plain.stage_times) == set(PLAIN_STAGES)
+    assert all(seconds > 0 for seconds in plain.stage_times.values())
 
 
 def test_detector_speed_times_every_frame_as_often():
