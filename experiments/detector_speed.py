@@ -239,10 +239,10 @@ def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]],
     rows = []
     for stage in (*stages, "total"):
         row = [stage]
-        for stages in breakdowns.values():
+        for by_stage in breakdowns.values():
             for group in ("all", "middle"):
-                value = (sum(times[group] for times in stages.values()) if stage == "total"
-                         else stages[stage][group])
+                value = (sum(times[group] for times in by_stage.values()) if stage == "total"
+                         else by_stage[stage][group])
                 row.append(f"{value:.2f}")
         rows.append(row)
     return rows
@@ -304,12 +304,10 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                                            f"renders, one call per {1000 * PACED_PAUSE:.0f} ms")[0])
             breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
             plain_breakdowns[name] = stage_breakdown(detectors["plain"], frames, passes, PLAIN_STAGES)
-            for stage, times in breakdowns[name].items():
-                result.figure(f"{name}/stage/{stage}/all_ms", times["all"])
-                result.figure(f"{name}/stage/{stage}/middle_ms", times["middle"])
-            for stage, times in plain_breakdowns[name].items():
-                result.figure(f"{name}/plain_stage/{stage}/all_ms", times["all"])
-                result.figure(f"{name}/plain_stage/{stage}/middle_ms", times["middle"])
+            for kind, split in (("stage", breakdowns), ("plain_stage", plain_breakdowns)):
+                for stage, times in split[name].items():
+                    result.figure(f"{name}/{kind}/{stage}/all_ms", times["all"])
+                    result.figure(f"{name}/{kind}/{stage}/middle_ms", times["middle"])
         result.table(SPEED_HEADERS, rows + paced_rows,
                      f"Calls alternating on the same frames, in whole passes over each set "
                      f"({', '.join(f'{calls_for(repeats, len(frames))} on the {name}' for name, frames in sets.items())}, "
