@@ -4,8 +4,10 @@ import math
 
 import cv2
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from balltrack.services.detector.arcs import arc_proposals, outline_pieces
+from balltrack.services.detector.arcs import arc_proposals, deepest_cut, outline_pieces
 from balltrack.services.detector.geometry import disc
 
 SHAPE = (240, 320)
@@ -91,3 +93,43 @@ def test_elongated_blobs_without_a_waist_are_not_cut():
     cv2.fillPoly(wedge, [np.array([[60, 100], [240, 70], [240, 170], [60, 140]], np.int32)], 255)
     cv2.circle(wedge, (150, 160), 12, 0, -1)
     assert len(outline_pieces(wedge)) <= 1
+
+
+def opencv_deepest_cut(points, depth):
+    """deepest_cut as OpenCV's convexHull and convexityDefects give it: the reference."""
+    contour = np.rint(points).astype(np.int32).reshape(-1, 1, 2)
+    hull = cv2.convexHull(contour, returnPoints=False)
+    if hull is None or len(hull) < 4:
+        return None
+    defects = cv2.convexityDefects(contour, np.sort(hull.reshape(-1))[:, None].astype(np.int32))
+    if defects is None:
+        return None
+    defects = defects.reshape(-1, 4)
+    defects = defects[(defects[:, 2] > 0) & (defects[:, 2] < len(points) - 1)]
+    if not len(defects) or defects[np.argmax(defects[:, 3]), 3] / 256.0 < depth:
+        return None
+    return int(defects[np.argmax(defects[:, 3]), 2])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.5, 4.0))
+def test_the_deepest_cut_is_opencvs_on_outlines_of_random_blobs(seed, depth):
+    # Blobs of 1-5 discs, ragged or not; each outline whole and an open piece of it. (Outlines
+    # that pass through a pixel twice, a one-pixel spur, are left out: where that pixel is a
+    # hull vertex, which visit OpenCV takes is up to its unstable sort.)
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((120, 120), np.uint8)
+    for count in range(rng.integers(1, 6)):
+        cv2.circle(mask, (int(rng.integers(20, 100)), int(rng.integers(20, 100))),
+                   int(rng.integers(3 if count else 12, 30)), 255, -1)
+    if rng.random() < 0.5:
+        mask = cv2.morphologyEx(mask | ((rng.random(mask.shape) < 0.1) * 255).astype(np.uint8), cv2.MORPH_OPEN, None)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    for contour in contours:
+        points = contour.reshape(-1, 2).astype(np.float64)
+        if len(points) < 24:
+            continue
+        start = int(rng.integers(0, len(points) - 12))
+        for piece in (points, points[start:start + int(rng.integers(12, len(points) - start + 1))]):
+            if len(np.unique(piece, axis=0)) == len(piece):
+                assert deepest_cut(piece, depth) == opencv_deepest_cut(piece, depth)
