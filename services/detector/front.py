@@ -22,6 +22,7 @@ import numpy as np
 from balltrack.services.detector.checks import CandidateMetrics
 from balltrack.services.detector.measure import colour_stats, measure_mask
 from balltrack.services.detector.geometry import Candidate, box_around, circle_overlap, disc, rim_directions
+from balltrack.services.detector.jit import compiled
 from balltrack.services.detector.proposals import FrameSearch
 
 # The front ball's rim is a brightness edge along this share of its length at least: a ball's
@@ -127,21 +128,38 @@ def rim_edge_share(gradient_x: np.ndarray, gradient_y: np.ndarray, x: float, y: 
     across the rim by at least ``step`` per pixel, within a pixel of the rim either way (the
     circle Hough returns is good to about a pixel)."""
     samples = int(min(96, max(24, 2 * math.pi * radius)))
-    cos, sin = rim_directions(samples)[:2]
+    directions = rim_directions(samples)
+    return rim_edges(np.ascontiguousarray(gradient_x), np.ascontiguousarray(gradient_y), float(x), float(y),
+                     float(radius), float(step), directions[0], directions[1])
+
+
+@compiled
+def rim_edges(gradient_x: np.ndarray, gradient_y: np.ndarray, x: float, y: float, radius: float,
+              step: float, cos: np.ndarray, sin: np.ndarray) -> float:
+    """``rim_edge_share`` over the rim samples in the directions ``cos``, ``sin``: at each, the
+    steepest change across the rim of the three points one pixel in, on and one pixel out.
+    (~45 numpy calls on a few dozen values took ~0.23 ms per circle.)"""
     height, width = gradient_x.shape
-    strongest = np.zeros(samples, np.float32)
-    seen = np.zeros(samples, bool)
-    for offset in (-1.0, 0.0, 1.0):
-        columns = np.rint(x + (radius + offset) * cos).astype(np.intp)
-        rows = np.rint(y + (radius + offset) * sin).astype(np.intp)
-        inside = (columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)
-        columns, rows = np.clip(columns, 0, width - 1), np.clip(rows, 0, height - 1)
-        across = np.abs(gradient_x[rows, columns] * cos + gradient_y[rows, columns] * sin)
-        strongest = np.maximum(strongest, np.where(inside, across, 0.0))
-        seen |= inside
-    if not seen.any():
+    samples = cos.size
+    seen = False
+    steep = 0
+    for index in range(samples):
+        strongest = 0.0
+        inside = False
+        for offset in (-1.0, 0.0, 1.0):
+            column = int(np.rint(x + (radius + offset) * cos[index]))
+            row = int(np.rint(y + (radius + offset) * sin[index]))
+            if 0 <= column < width and 0 <= row < height:
+                inside = True
+                across = abs(np.float64(gradient_x[row, column]) * cos[index]
+                             + np.float64(gradient_y[row, column]) * sin[index])
+                strongest = max(strongest, across)
+        if inside:
+            seen = True
+            steep += strongest >= step
+    if not seen:
         return 0.0
-    return float(np.count_nonzero(strongest[seen] >= step)) / samples
+    return steep / samples
 
 
 def inner_gradient(magnitude: np.ndarray, x: float, y: float, radius: float) -> float:

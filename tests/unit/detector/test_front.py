@@ -5,10 +5,12 @@ import math
 
 import cv2
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector
-from balltrack.services.detector.geometry import Candidate
+from balltrack.services.detector.geometry import Candidate, rim_directions
 from balltrack.services.detector.front import front_balls, may_overlap, rim_edge_share
 from balltrack.services.detector.proposals import fill_holes, frame_search
 from tests.unit.detector.drawing import TENNIS_BGR, coverage, draw_ball, floor, to_uint8
@@ -94,3 +96,35 @@ def test_only_a_ball_in_front_may_hide_much_of_another():
     assert may_overlap(first, Candidate(100.0, 118.0, 20.0, in_front=True))
     assert may_overlap(first, Candidate(100.0, 110.0, 20.0, in_front=True))  # ~0.68: mostly hidden
     assert not may_overlap(first, Candidate(100.0, 105.0, 20.0, in_front=True))  # one ball twice
+
+
+def numpy_rim_edge_share(gradient_x, gradient_y, x, y, radius, step):
+    """rim_edge_share in numpy array operations: the reference."""
+    samples = int(min(96, max(24, 2 * math.pi * radius)))
+    cos, sin = rim_directions(samples)[:2]
+    height, width = gradient_x.shape
+    strongest = np.zeros(samples, np.float32)
+    seen = np.zeros(samples, bool)
+    for offset in (-1.0, 0.0, 1.0):
+        columns = np.rint(x + (radius + offset) * cos).astype(np.intp)
+        rows = np.rint(y + (radius + offset) * sin).astype(np.intp)
+        inside = (columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)
+        columns, rows = np.clip(columns, 0, width - 1), np.clip(rows, 0, height - 1)
+        across = np.abs(gradient_x[rows, columns] * cos + gradient_y[rows, columns] * sin)
+        strongest = np.maximum(strongest, np.where(inside, across, 0.0))
+        seen |= inside
+    if not seen.any():
+        return 0.0
+    return float(np.count_nonzero(strongest[seen] >= step)) / samples
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(-20, 80), st.floats(-20, 60), st.floats(2, 60),
+       st.one_of(st.floats(0, 3), st.integers(0, 3).map(float)))
+def test_the_rim_edge_share_is_the_array_operations_one(seed, x, y, radius, step):
+    # (circles inside the planes, across their edges and outside them; whole gradients and
+    # steps, so that some changes across the rim are exactly the step)
+    rng = np.random.default_rng(seed)
+    gradient_x, gradient_y = (rng.integers(-3, 4, (48, 64)).astype(np.float32) for _ in range(2))
+    assert rim_edge_share(gradient_x, gradient_y, x, y, radius, step) == \
+        numpy_rim_edge_share(gradient_x, gradient_y, x, y, radius, step)
