@@ -3,7 +3,11 @@ that has no event to watch lets SIGTERM interrupt it as Ctrl-C does: ``terminate
 
 import contextlib
 import signal
+import sys
 import threading
+
+# An interrupt that Python swallowed is raised again this much later (see terminate_as_interrupt).
+INTERRUPT_AGAIN_S = 0.05
 
 
 def set_from_signal(event: threading.Event) -> None:
@@ -28,9 +32,33 @@ def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
 def terminate_as_interrupt():
     """Within the block, SIGTERM raises KeyboardInterrupt as SIGINT does, so a command ends
     the same way on either (its ``except KeyboardInterrupt``: one line, its status); the
-    previous handler is back afterwards. Call from the main thread."""
+    previous handlers are back afterwards. Call from the main thread.
+
+    An interrupt raised where Python only reports an exception and goes on (an at-fork hook
+    while a child process starts, a destructor) would be lost, and the command would run on:
+    seen, frame_transport's run of 100,000 messages went on after a SIGTERM that landed in
+    logging's at-fork hook. Such an interrupt is raised again INTERRUPT_AGAIN_S later (SIGALRM),
+    once the main thread is back in the block's own code."""
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    previous_alarm = signal.signal(signal.SIGALRM, signal.default_int_handler)
+    previous_hook = sys.unraisablehook
+    armed = False
+
+    def raise_again(unraisable) -> None:
+        nonlocal armed
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
+            # (later, not now: raised inside this hook, it would be swallowed as well)
+            signal.setitimer(signal.ITIMER_REAL, INTERRUPT_AGAIN_S)
+            armed = True
+        else:
+            previous_hook(unraisable)
+
+    sys.unraisablehook = raise_again
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
+        if armed:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous_alarm)
         signal.signal(signal.SIGTERM, previous)

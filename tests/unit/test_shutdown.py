@@ -1,7 +1,9 @@
 """SIGINT/SIGTERM set the one stop event without ever blocking the thread they interrupt."""
 
 import signal
+import sys
 import threading
+import time
 
 import pytest
 
@@ -35,3 +37,22 @@ def test_terminate_as_interrupt_raises_keyboard_interrupt_then_restores_the_hand
             assert signal.getsignal(signal.SIGTERM) is signal.default_int_handler
             signal.raise_signal(signal.SIGTERM)  # (its handler runs before this returns)
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+class InterruptedDestructor:
+    """An object whose destructor is interrupted: Python reports that and goes on."""
+
+    def __del__(self):
+        raise KeyboardInterrupt
+
+
+def test_an_interrupt_that_python_swallows_is_raised_again_in_the_block():
+    before, alarm_before = sys.unraisablehook, signal.getsignal(signal.SIGALRM)
+    with pytest.raises(KeyboardInterrupt):
+        with terminate_as_interrupt():
+            InterruptedDestructor()  # (dropped at once: its interrupt goes to sys.unraisablehook)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                time.sleep(0.01)
+    assert sys.unraisablehook is before
+    assert signal.getsignal(signal.SIGALRM) is alarm_before
