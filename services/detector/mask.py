@@ -103,12 +103,18 @@ def reference_level(image_bgr: np.ndarray, value: np.ndarray | None = None) -> f
         small = quarter_sample(image_bgr)
         value = brightest_channel(small)
     last = value.size - 1
-    median = np.partition(value.ravel(), last // 2)[last // 2]
+    median = ranked_value(value, last // 2)
     # The bright level of areas, not of single pixels: isolated glints, hot pixels and
     # salt noise would otherwise make every colour in the frame look dull.
-    areas = cv2.erode(value, AREA_KERNEL).ravel()
-    bright = np.partition(areas, int(0.99 * last))[int(0.99 * last)]
+    bright = ranked_value(cv2.erode(value, AREA_KERNEL), int(0.99 * last))
     return float(max(1.0, min(float(bright), 3.0 * float(median))))
+
+
+def ranked_value(plane: np.ndarray, rank: int) -> int:
+    """The ``rank``-th smallest value (from 0) of a uint8 plane: ``np.partition``'s, read from
+    the plane's histogram (~25 against ~55 us on a 160x120 sample)."""
+    counts = np.cumsum(cv2.calcHist([plane], [0], None, [256], [0, 256]).ravel().astype(np.int64))
+    return int(np.searchsorted(counts, rank, side="right"))
 
 
 def brighten(image_bgr: np.ndarray, gain: float, small: np.ndarray) -> np.ndarray:

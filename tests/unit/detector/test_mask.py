@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.mask import (ColourMasker, brighten, check_image, ellipse_kernel, hue_mask,
-                                              frame_gain, quarter_sample, reference_level)
+                                              frame_gain, quarter_sample, ranked_value, reference_level)
 from tests.unit.detector.drawing import coverage, draw_ball, floor, pitch_dark_frame, scene, to_uint8
 
 
@@ -42,6 +42,16 @@ def test_reference_level_is_the_bright_level_capped_by_the_median():
     sky = np.full((120, 64, 3), 10, np.uint8)
     sky[:40] = 200
     assert reference_level(sky) == 30.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), height=st.integers(1, 130), width=st.integers(1, 170),
+       levels=st.integers(1, 256), share=st.floats(0.0, 1.0))
+def test_ranked_value_is_numpys_partition(seed, height, width, levels, share):
+    # few levels: ties at the rank itself, the case a histogram read off by one would miss
+    plane = np.random.default_rng(seed).integers(0, levels, (height, width)).astype(np.uint8)
+    rank = int(share * (plane.size - 1))
+    assert ranked_value(plane, rank) == np.partition(plane.ravel(), rank)[rank]
 
 
 def test_reference_level_ignores_isolated_bright_pixels():
