@@ -103,6 +103,11 @@ class DetectorConfig:
     # Shrinking is for speed.
     work_width: int = param(640, "wider frames are shrunk to this before processing (px); 0 = full size",
                             low=64, off=0)
+    # A frame makes dozens of small OpenCV calls, each of which wakes the pool's other threads:
+    # on the demo's frames, 33 ms apart on a 2-core machine, one thread took p50 3.24-3.29 ms a
+    # frame against 3.35-3.42 ms with two, and leaves the other core to the camera and Zenoh.
+    threads: int = param(1, "OpenCV threads of the detector service's process (cv2.setNumThreads); "
+                            "0 = OpenCV's default, one per core", low=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -11,6 +11,8 @@ Example:
     balltrack run detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
 """
 
+import cv2
+
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.memory import keep_freed_memory
@@ -31,6 +33,12 @@ def ball_fields(detection, width: int, height: int) -> dict:
             "score": float(detection.score)}
 
 
+def use_threads(config: DetectorConfig) -> None:
+    """Give OpenCV the configured number of threads (process-wide: services sharing the process
+    share it)."""
+    cv2.setNumThreads(config.threads if config.threads > 0 else -1)  # (-1: OpenCV's default)
+
+
 def build(service: ServiceContext):
     # Before the first frame (and before the service counts as alive): no frame waits for numba.
     service.log.info("detector kernels ready in %.1f s", compile_kernels())
@@ -41,7 +49,13 @@ def build(service: ServiceContext):
     annotated = service.publisher(keys.IMAGE_OUT, "Image")
     tuning = service.publisher(keys.IMAGE_TUNING, "Image")
     detector = {"core": BallDetector(service.config)}
-    service.on_config_change(lambda config: detector.update(core=BallDetector(config)))
+    use_threads(service.config)
+
+    def on_config_change(config: DetectorConfig) -> None:
+        use_threads(config)
+        detector.update(core=BallDetector(config))
+
+    service.on_config_change(on_config_change)
 
     def on_frame(frame: dict) -> None:
         image = image_to_bgr(frame)
