@@ -19,6 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from balltrack.common.config import ConfigError, load_config
 from balltrack.experiments.real_photos import score_folder, score_image
@@ -239,6 +241,32 @@ def test_what_a_found_ball_leaves_of_a_heap_is_searched_as_a_blob(detector):
                     if math.hypot(candidate.x - u, candidate.y - v) < 1.0
                     and abs(candidate.radius - radius) < 1.0), key=lambda candidate: candidate.score)
         assert best.score >= 0.9
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 80), st.integers(0, 60), st.integers(0, 80), st.integers(0, 60),
+                          st.lists(st.tuples(st.floats(-10, 90), st.floats(-10, 70), st.floats(0.5, 20)),
+                                   min_size=1, max_size=3)),
+                min_size=1, max_size=6))
+def test_the_explained_plane_is_the_mask_with_its_balls_whatever_came_before(frames):
+    # The plane is reused from call to call and only its box is copied and cleared: each use
+    # must still hold exactly the mask, zero outside its box, with that use's balls drawn.
+    detector = BallDetector(DetectorConfig())
+    random = np.random.default_rng(len(frames))
+    for left, top, right, bottom, balls in frames:
+        mask = np.zeros((60, 80), np.uint8)
+        mask[top:bottom, left:right] = random.choice([0, 255], size=mask[top:bottom, left:right].shape)
+        box = (left, top, right, bottom) if random.random() < 0.8 else None
+        discs = [Candidate(x, y, radius) for x, y, radius in balls]
+        plane, plane_box = detector._explained_plane(0, mask, box, discs)
+        expected = mask.copy()
+        for disc in discs:
+            cv2.circle(expected, (int(round(disc.x)), int(round(disc.y))),
+                       int(math.ceil(disc.radius * 1.08 + 1)), EXPLAINED, -1)
+        np.testing.assert_array_equal(plane, expected)
+        outside = plane.copy()
+        outside[plane_box[1]:plane_box[3], plane_box[0]:plane_box[2]] = 0
+        assert not outside.any(), plane_box
 
 
 def test_detections_are_sorted_largest_first(detector):
