@@ -282,7 +282,6 @@ class BallDetector:
         plane = planes[round_index]
         if plane.shape != mask.shape:
             plane = planes[round_index] = np.zeros_like(mask)
-            written[round_index] = (0, 0, 0, 0)
         left, top, right, bottom = box if box is not None else (0, 0, width, height)
         old_left, old_top, old_right, old_bottom = written[round_index]
         plane[old_top:old_bottom, old_left:old_right] = 0

@@ -244,21 +244,22 @@ def test_what_a_found_ball_leaves_of_a_heap_is_searched_as_a_blob(detector):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 80), st.integers(0, 60), st.integers(0, 80), st.integers(0, 60),
+@given(st.lists(st.tuples(st.sampled_from([(60, 80), (50, 70)]), st.integers(0, 80), st.integers(0, 60),
+                          st.integers(0, 80), st.integers(0, 60), st.booleans(), st.integers(0, 2**32 - 1),
                           st.lists(st.tuples(st.floats(-10, 90), st.floats(-10, 70), st.floats(0.5, 20)),
                                    min_size=1, max_size=3)),
                 min_size=1, max_size=6))
 def test_the_explained_plane_is_the_mask_with_its_balls_whatever_came_before(frames):
-    # The plane is reused from call to call and only its box is copied and cleared: each use
-    # must still hold exactly the mask, zero outside its box, with that use's balls drawn.
+    # The plane is reused from call to call (made anew when the frame size changes) and only
+    # its box is copied and cleared: each use must still hold exactly the mask, zero outside
+    # its box, with that use's balls drawn.
     detector = BallDetector(DetectorConfig())
-    random = np.random.default_rng(len(frames))
-    for left, top, right, bottom, balls in frames:
-        mask = np.zeros((60, 80), np.uint8)
-        mask[top:bottom, left:right] = random.choice([0, 255], size=mask[top:bottom, left:right].shape)
-        box = (left, top, right, bottom) if random.random() < 0.8 else None
+    for shape, left, top, right, bottom, boxed, seed, balls in frames:
+        mask = np.zeros(shape, np.uint8)
+        part = mask[top:bottom, left:right]
+        part[...] = np.random.default_rng(seed).choice([0, 255], size=part.shape)
         discs = [Candidate(x, y, radius) for x, y, radius in balls]
-        plane, plane_box = detector._explained_plane(0, mask, box, discs)
+        plane, plane_box = detector._explained_plane(0, mask, (left, top, right, bottom) if boxed else None, discs)
         expected = mask.copy()
         for disc in discs:
             cv2.circle(expected, (int(round(disc.x)), int(round(disc.y))),
