@@ -11,7 +11,7 @@ from balltrack.services.detector.checks import CandidateMetrics
 from balltrack.services.detector.measure import NO_COLOUR, colour_stats, measure_mask
 from balltrack.services.detector.fit import refine_on_boundary
 from balltrack.services.detector.geometry import Candidate, circle_overlap
-from balltrack.services.detector.mask import EXPLAINED
+from balltrack.services.detector.mask import EXPLAINED, explained_radius
 from balltrack.services.detector.proposals import CLUSTER_COVER, FrameSearch, blob_cover, inscribed_discs
 
 # A member of a cluster of touching balls (see cluster_candidates) is a circle of enough pixels
@@ -91,7 +91,7 @@ def cluster_candidates(contour: np.ndarray, search: FrameSearch, mask: np.ndarra
         for other in members:
             if other is not member:
                 cv2.circle(others, (int(round(other.x)), int(round(other.y))),
-                           int(math.ceil(other.radius * 1.08 + 1)), EXPLAINED, -1)
+                           explained_radius(other.radius), EXPLAINED, -1)
         on_mask = measure_mask(member, others)
         if on_mask is None or on_mask.fill < CLUSTER_FILL or on_mask.spread > CLUSTER_SPREAD:
             continue

@@ -63,7 +63,8 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.dark import second_look
 from balltrack.services.detector.front import may_overlap
 from balltrack.services.detector.geometry import Candidate, circle_overlap
-from balltrack.services.detector.mask import EXPLAINED, ColourMasker, ColourPlanes, check_image
+from balltrack.services.detector.mask import (EXPLAINED, ColourMasker, ColourPlanes, check_image,
+                                              explained_radius)
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
 from balltrack.services.detector.proposals import FrameSearch, fill_holes, frame_search, leftover_blobs, leftover_search
 from balltrack.services.detector.regions import Box
@@ -287,7 +288,7 @@ class BallDetector:
         plane[old_top:old_bottom, old_left:old_right] = 0
         plane[top:bottom, left:right] = mask[top:bottom, left:right]
         for ball in balls:
-            x, y, radius = int(round(ball.x)), int(round(ball.y)), int(math.ceil(ball.radius * 1.08 + 1))
+            x, y, radius = int(round(ball.x)), int(round(ball.y)), explained_radius(ball.radius)
             cv2.circle(plane, (x, y), radius, EXPLAINED, -1)
             left, top = max(0, min(left, x - radius)), max(0, min(top, y - radius))
             right, bottom = min(width, max(right, x + radius + 1)), min(height, max(bottom, y + radius + 1))

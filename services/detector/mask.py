@@ -41,6 +41,12 @@ AREA_KERNEL = np.ones((3, 3), np.uint8)
 EXPLAINED = 128
 
 
+def explained_radius(radius: float) -> int:
+    """Radius (px) of the disc that stands for a ball of ``radius`` once it is accepted or
+    taken: 8 % and a pixel wider than its circle, as a mask's edge is ragged."""
+    return int(math.ceil(1.08 * radius + 1))
+
+
 def hue_mask(hue: np.ndarray, config: DetectorConfig) -> np.ndarray:
     """255 where a hue plane (OpenCV's 0-179) is in the configured range, else 0; the range may
     wrap through 0 (red)."""

@@ -19,7 +19,7 @@ import numpy as np
 from balltrack.services.detector.measure import lit_level
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import Candidate
-from balltrack.services.detector.mask import EXPLAINED, ColourPlanes
+from balltrack.services.detector.mask import EXPLAINED, ColourPlanes, explained_radius
 
 # Hough circles per mask blob: beyond the strongest few they are duplicates or clutter.
 HOUGH_CIRCLES_PER_BLOB = 4
@@ -254,7 +254,7 @@ def inscribed_discs(contour: np.ndarray, search: FrameSearch,
     area = cv2.countNonZero(blob)
     for circle in taken:
         cv2.circle(blob, (int(round(circle.x - left)), int(round(circle.y - top))),
-                   int(math.ceil(1.08 * circle.radius + 1)), 0, -1)
+                   explained_radius(circle.radius), 0, -1)
     discs: list[Candidate] = []
     while len(discs) < CLUSTER_BALLS and cv2.countNonZero(blob) > (1.0 - CLUSTER_COVER) * area:
         distance = cv2.distanceTransform(blob, cv2.DIST_L2, 5)
@@ -268,13 +268,13 @@ def inscribed_discs(contour: np.ndarray, search: FrameSearch,
 
 
 def blob_cover(contour: np.ndarray, mask: np.ndarray, discs: list[Candidate]) -> float:
-    """Fraction of the blob's pixels in one of ``discs`` (8 % and a pixel wider: a mask's edge
-    is ragged)."""
+    """Fraction of the blob's pixels in one of ``discs`` (drawn ``explained_radius`` wide: a
+    mask's edge is ragged)."""
     blob, left, top = blob_image(contour, mask)
     covered = np.zeros_like(blob)
     for disc in discs:
         cv2.circle(covered, (int(round(disc.x - left)), int(round(disc.y - top))),
-                   int(math.ceil(1.08 * disc.radius + 1)), 255, -1)
+                   explained_radius(disc.radius), 255, -1)
     return cv2.countNonZero(blob & covered) / max(1, cv2.countNonZero(blob))
 
 
@@ -296,9 +296,9 @@ def leftover_blobs(balls: list[Candidate], explained: np.ndarray) -> list[np.nda
         leftover = cv2.inRange(explained[y0:y1, x0:x1], 255, 255)
         contours, _ = cv2.findContours(leftover, cv2.RETR_EXTERNAL,
                                        cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
-        # (the disc was drawn ceil(1.08 r + 1) px wide; its neighbours' edge pixels lie a
+        # (the disc was drawn explained_radius(r) px in radius; its neighbours' edge pixels lie a
         # pixel beyond, and the piece's outline a further pixel for the mask's raggedness)
-        touching = math.ceil(1.08 * ball.radius + 1) + LEFTOVER_TOUCH
+        touching = explained_radius(ball.radius) + LEFTOVER_TOUCH
         for contour in contours:
             points = contour.reshape(-1, 2).astype(np.float32)
             nearest = float(np.min(np.hypot(points[:, 0] - ball.x, points[:, 1] - ball.y)))
