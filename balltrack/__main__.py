@@ -1,5 +1,4 @@
-import sys
-
 from balltrack.cli import main
+from balltrack.common.terminal import exit_with
 
-sys.exit(main())
+exit_with(main)

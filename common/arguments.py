@@ -1,9 +1,10 @@
-"""Argparse types for the numbers commands take: a bad value is refused by argparse with one
-line and status 2, before anything starts (``nan``, a negative count or a zero rate would
-otherwise reach a division or a sleep).
+"""The argument parser of every command, and argparse types for the numbers commands take: a
+bad argument is refused with one line and status 2, before anything starts (``nan``, a
+negative count or a zero rate would otherwise reach a division or a sleep).
 
 Example::
 
+    parser = ArgumentParser(prog="python -m balltrack.experiments.locator_table")
     parser.add_argument("--seconds", type=number(above=0), default=20.0)
     parser.add_argument("--frames", type=integer(minimum=1), default=150)
 """
@@ -11,6 +12,13 @@ Example::
 import argparse
 import math
 from typing import Callable
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with a one-line error (the reason, not the usage block) and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: {message}\n")
 
 
 def number(minimum: float | None = None, above: float | None = None) -> Callable[[str], float]:

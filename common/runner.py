@@ -26,12 +26,13 @@ import time
 from typing import Any, Callable
 
 from balltrack.common import keys as key_table
+from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
                                      settings_by_service)
 from balltrack.common.context import ServiceContext
 from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
-from balltrack.common.session import (ArgumentParser, SessionOpenError, add_session_arguments, close_session,
+from balltrack.common.session import (SessionOpenError, add_session_arguments, close_session,
                                       open_from_args, peer_conflict)
 from balltrack.common.shutdown import stop_on_signals
 

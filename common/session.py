@@ -41,13 +41,6 @@ def default_endpoints() -> list[str]:
     return [item for item in configured.split(",") if item.strip()] or [DEFAULT_ENDPOINT]
 
 
-class ArgumentParser(argparse.ArgumentParser):
-    """argparse with a one-line error (the reason, not the usage block) and exit status 2."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: {message}\n")
-
-
 def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = True,
                           role: str | None = None, peer: bool = False) -> None:
     """The options every service and command shares: --connect, --namespace, --config, --set,

@@ -2,12 +2,13 @@
 
 When the reader goes away, writing raises BrokenPipeError. The command should then stop as if
 asked to and exit 0 without a traceback: Python would otherwise report the error again when it
-flushes stdout at exit. ``balltrack``'s commands (``balltrack/cli/output.py``) and the
-experiments run as modules print through these.
+flushes stdout at exit. ``balltrack``'s commands (``balltrack/cli/output.py``) print through
+these; every module run with ``python -m`` ends through ``exit_with``.
 """
 
 import os
 import sys
+from typing import Callable, NoReturn
 
 
 def silence_closed_stdout() -> None:
@@ -27,3 +28,15 @@ def print_lines(lines: list[str]) -> bool:
     except BrokenPipeError:
         silence_closed_stdout()
         return False
+
+
+def exit_with(main: Callable[[], int]) -> NoReturn:
+    """Run a command's ``main`` and exit with its status: what a module run with ``python -m``
+    does under ``if __name__ == "__main__"``. A reader that went away (``| head``) ends the
+    command quietly with status 0, wherever in ``main`` the write was."""
+    try:
+        status = main()
+    except BrokenPipeError:
+        silence_closed_stdout()
+        status = 0
+    sys.exit(status)

@@ -24,10 +24,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from balltrack.common.arguments import number
+from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
-from balltrack.common.session import (DEFAULT_PORT, ArgumentParser, SessionOpenError, close_session,
+from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, close_session,
                                       default_endpoints, load_config_file, secure_client_path,
                                       secure_router_path)
 from balltrack.common.status import service_status

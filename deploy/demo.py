@@ -41,11 +41,12 @@ from pathlib import Path
 import numpy as np
 
 from balltrack.common import keys as key_table
-from balltrack.common.arguments import number
+from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.keys import Keys
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
-from balltrack.common.session import ArgumentParser, close_session, open_session, secure_client_path
+from balltrack.common.session import close_session, open_session, secure_client_path
 from balltrack.common.shutdown import set_from_signal
+from balltrack.common.terminal import exit_with
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.cli import LaunchError, parse_service_overrides
 from balltrack.deploy.command import Command
@@ -380,4 +381,4 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     os.environ.setdefault("MUJOCO_GL", "egl")
-    sys.exit(main())
+    exit_with(main)

@@ -14,7 +14,9 @@ import importlib
 import sys
 from pathlib import Path
 
+from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import describe_config, format_value
+from balltrack.common.terminal import exit_with
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
@@ -92,8 +94,8 @@ def readme_block(text: str, begin: str = BEGIN, end: str = END) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m balltrack.deploy.params", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.deploy.params", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--write", action="store_true", help="update README.md in place")
     group.add_argument("--check", action="store_true", help="exit 1 if README.md is out of step")
@@ -126,4 +128,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

@@ -19,6 +19,7 @@ numbers, which rejects a bad message with a one-line reason.
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
@@ -27,15 +28,37 @@ import msgpack
 import zenoh
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description="print the ball's 3D position")
+class ArgumentParser(argparse.ArgumentParser):
+    def error(self, message: str):  # the reason in one line, not the usage block
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
+def count(text: str) -> int:
+    if not text.isdigit():
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return int(text)
+
+
+def printed(line: str) -> bool:
+    """Print ``line``; False when the reader of our output has gone (``| head``): stdout then
+    points at /dev/null, so that the flush at exit does not fail again."""
+    try:
+        print(line, flush=True)
+        return True
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return False
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = ArgumentParser(description="print the ball's 3D position")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help="router endpoint, repeatable (default tcp/127.0.0.1:7447)")
     parser.add_argument("--namespace", default="", help="the robot's key prefix, e.g. robot1")
-    parser.add_argument("--count", type=int, default=0, help="stop after N messages (0: never)")
+    parser.add_argument("--count", type=count, default=0, help="stop after N messages (0: never)")
     parser.add_argument("--validate", action="store_true",
                         help="check each message with balltrack's common.messages")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     if args.validate:
         from balltrack.common.messages import decode
@@ -59,10 +82,13 @@ def main() -> int:
     def on_sample(sample) -> None:
         try:
             ball = read(sample.payload.to_bytes())
-            print(f"seq {ball['header']['seq']:>6}  x {ball['x']:+.3f}  y {ball['y']:+.3f}  "
-                  f"z {ball['z']:.3f}  distance {ball['distance']:.3f} m", flush=True)
+            line = (f"seq {ball['header']['seq']:>6}  x {ball['x']:+.3f}  y {ball['y']:+.3f}  "
+                    f"z {ball['z']:.3f}  distance {ball['distance']:.3f} m")
         except (ValueError, KeyError, TypeError) as error:
             print(f"skipped a bad message: {error!r}", file=sys.stderr, flush=True)
+            return
+        if not printed(line):
+            stop.set()  # nobody reads on: stop as if asked to
             return
         received[0] += 1
         if args.count and received[0] >= args.count:
@@ -81,7 +107,8 @@ def main() -> int:
               f"{reason}", file=sys.stderr)
         return 1
     subscriber = session.declare_subscriber(key, on_sample)
-    print(f"listening on {key} (Ctrl-C to stop)", flush=True)
+    if not printed(f"listening on {key} (Ctrl-C to stop)"):
+        stop.set()
     while not stop.wait(0.2):
         pass
     subscriber.undeclare()

@@ -23,7 +23,8 @@ import sys
 import traceback
 from pathlib import Path
 
-from balltrack.common.session import ArgumentParser
+from balltrack.common.arguments import ArgumentParser
+from balltrack.common.terminal import exit_with
 from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
 from balltrack.experiments.detector_speed import DEFAULT_PHOTOS
 from balltrack.experiments.real_photos import photo_sets
@@ -140,4 +141,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

@@ -27,12 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from balltrack.common.arguments import integer
+from balltrack.common.arguments import ArgumentParser, integer
 from balltrack.common.messages import MessageError
 from balltrack.common.recording import RecordingError
-from balltrack.common.session import ArgumentParser
 from balltrack.common.shutdown import terminate_as_interrupt
-from balltrack.common.terminal import print_lines
+from balltrack.common.terminal import exit_with, print_lines
 
 FORMAT = "balltrack detector outputs 1"
 # How many differing frames ``compare`` describes (it counts them all).
@@ -161,4 +160,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

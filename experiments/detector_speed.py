@@ -29,7 +29,6 @@ Example::
     balltrack experiment detector_speed --photos /work/shared/data
 """
 
-import argparse
 import math
 import statistics
 import sys
@@ -39,6 +38,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from balltrack.common.arguments import ArgumentParser
+from balltrack.common.terminal import exit_with
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
 
@@ -352,7 +353,8 @@ def run(options) -> "ExperimentResult":
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m balltrack.experiments.detector_speed",
+                            description=__doc__.splitlines()[0])
     parser.add_argument("--photos", type=Path, default=None,
                         help=f"folder of .jpg/.png photos, searched recursively (default {DEFAULT_PHOTOS} "
                              "when it exists)")
@@ -381,4 +383,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

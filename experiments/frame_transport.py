@@ -33,11 +33,11 @@ import threading
 import time
 from pathlib import Path
 
-from balltrack.common.arguments import integer, number
+from balltrack.common.arguments import ArgumentParser, integer, number
 from balltrack.common.memory import keep_freed_memory
-from balltrack.common.session import ArgumentParser, client_config
+from balltrack.common.session import client_config
 from balltrack.common.shutdown import terminate_as_interrupt
-from balltrack.common.terminal import print_lines
+from balltrack.common.terminal import exit_with, print_lines
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
 
@@ -250,4 +250,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

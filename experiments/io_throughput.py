@@ -17,7 +17,6 @@
 import argparse
 import io
 import math
-import sys
 import tempfile
 import threading
 import time
@@ -27,9 +26,10 @@ import cv2
 import numpy as np
 import zenoh
 
-from balltrack.common.arguments import integer, number
+from balltrack.common.arguments import ArgumentParser, integer, number
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
+from balltrack.common.terminal import exit_with
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.command import Command
 from balltrack.deploy.launcher import start_system
@@ -164,7 +164,8 @@ def record_and_play(endpoint: str, folder: Path, frames: int, small: int, sessio
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.experiments.io_throughput", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=number(above=0), default=20.0, help="camera measurement window")
     parser.add_argument("--frames", type=integer(minimum=1), default=300, help="640x480 bgr8 frames recorded and played")
     parser.add_argument("--small", type=integer(minimum=1), default=20000, help="Ball3D messages recorded and played")
@@ -187,4 +188,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

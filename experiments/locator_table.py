@@ -15,11 +15,12 @@ Example::
     python -m balltrack.experiments.locator_table --detector-model enclosing   # locator assumes mean
 """
 
-import argparse
 
 import numpy as np
 
+from balltrack.common.arguments import ArgumentParser
 from balltrack.common.pinhole import Intrinsics
+from balltrack.common.terminal import exit_with
 from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful
 from balltrack.services.locator.projection import CIRCLE_MODELS, project_sphere
 
@@ -81,7 +82,8 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="python -m balltrack.experiments.locator_table",
+                            description=__doc__.split("\n\n")[0])
     parser.add_argument("--circle-model", choices=CIRCLE_MODELS, default="mean",
                         help="what the locator assumes the detector's circle measures (default: mean)")
     parser.add_argument("--detector-model", choices=CIRCLE_MODELS, default=None,
@@ -99,4 +101,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_with(main)

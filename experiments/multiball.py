@@ -194,6 +194,7 @@ def _run_layout(layout, frames: int, follower, detector, bar) -> dict:
 if __name__ == "__main__":
     import sys
 
+    from balltrack.common.terminal import exit_with
     from balltrack.experiments.cli import main
 
-    sys.exit(main([NAME, *sys.argv[1:]]))
+    exit_with(lambda: main([NAME, *sys.argv[1:]]))

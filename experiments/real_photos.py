@@ -28,7 +28,6 @@ The photos are only read: nothing of them is copied into the output folder but f
 numbers.
 """
 
-import argparse
 import json
 import sys
 import time
@@ -38,7 +37,9 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import ConfigError, load_config
+from balltrack.common.terminal import exit_with
 from balltrack.experiments.detector_speed import PlainDetector
 from balltrack.experiments.photo_variants import VARIANTS, Variant
 from balltrack.services.detector.config import DetectorConfig
@@ -278,8 +279,8 @@ def print_misses(folders: list[Path], config: DetectorConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.real_photos",
-                                     description="Score the ball detector on labelled photo sets.")
+    parser = ArgumentParser(prog="python -m balltrack.experiments.real_photos",
+                            description="Score the ball detector on labelled photo sets.")
     parser.add_argument("folders", nargs="+",
                         help="folders with images and labels.json, or folders of such folders")
     parser.add_argument("--config", help="detector TOML config file")
@@ -346,4 +347,4 @@ def print_variants(folders: list[Path], config: DetectorConfig) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

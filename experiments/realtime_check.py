@@ -24,10 +24,11 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from balltrack.common.arguments import integer  # noqa: E402
+from balltrack.common.arguments import ArgumentParser, integer  # noqa: E402
 from balltrack.common.config import ConfigError, load_config  # noqa: E402
 from balltrack.common.messages import decode  # noqa: E402
 from balltrack.common.session import open_session  # noqa: E402
+from balltrack.common.terminal import exit_with  # noqa: E402
 from balltrack.deploy.launcher import SERVICES, LaunchError, start_system  # noqa: E402
 from balltrack.experiments.processes import cpu_seconds  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
@@ -103,8 +104,8 @@ def run(arguments, log_dir: Path) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m balltrack.experiments.realtime_check", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.experiments.realtime_check", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=integer(minimum=1), default=20, help="measured wall seconds (default 20)")
     parser.add_argument("--width", type=int, default=640)
     parser.add_argument("--height", type=int, default=480)
@@ -131,4 +132,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

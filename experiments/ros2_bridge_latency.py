@@ -19,16 +19,16 @@ difference of the medians is what the bridge adds. CPU is the bridge process's u
 import argparse
 import os
 import statistics
-import sys
 import tempfile
 import threading
 import time
 
 import numpy as np
 
-from balltrack.common.arguments import integer, number
+from balltrack.common.arguments import ArgumentParser, integer, number
 from balltrack.common.messages import encode, header
 from balltrack.common.session import open_session
+from balltrack.common.terminal import exit_with
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.processes import cpu_seconds
 from balltrack.services.ros2_bridge import convert
@@ -95,7 +95,8 @@ def stream(sessions, publish_key: str, receive_key: str, payloads: list[bytes], 
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.experiments.ros2_bridge_latency", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--count", type=integer(minimum=1), default=300, help="messages per stream")
     parser.add_argument("--rate", type=number(above=0), default=30.0, help="messages per second")
     args = parser.parse_args(argv)
@@ -150,4 +151,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

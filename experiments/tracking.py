@@ -435,6 +435,7 @@ def _plots(result: ExperimentResult, example: Outcome, options: Options) -> None
 if __name__ == "__main__":
     import sys
 
+    from balltrack.common.terminal import exit_with
     from balltrack.experiments.cli import main
 
-    sys.exit(main([NAME, *sys.argv[1:]]))
+    exit_with(lambda: main([NAME, *sys.argv[1:]]))

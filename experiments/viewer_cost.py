@@ -24,17 +24,17 @@ import argparse
 import io
 import json
 import re
-import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
 
 from balltrack.common import keys
-from balltrack.common.arguments import number
+from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.messages import MessageError, decode
 from balltrack.common.network import free_port
 from balltrack.common.session import open_session
+from balltrack.common.terminal import exit_with
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
 from balltrack.experiments.base import quantile
@@ -146,7 +146,8 @@ def _summary(command: Command) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(prog="python -m balltrack.experiments.viewer_cost", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=number(above=0), default=30.0, help="measurement window per phase")
     args = parser.parse_args(argv)
     rows = []
@@ -211,4 +212,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

@@ -27,7 +27,7 @@ from balltrack.cli import (calibrate, config, introspect, network, offline, publ
 from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.common.keys import Keys
-from balltrack.common.session import ArgumentParser
+from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import silence_closed_stdout
 
 
@@ -85,6 +85,3 @@ def main(argv: list[str] | None = None) -> int:
         silence_closed_stdout()
         return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -6,13 +6,12 @@ Example::
     python -m balltrack.services.simulator.benchmark --frames 150 --set shadows=true
 """
 
-import argparse
 import math
-import sys
 import time
 
-from balltrack.common.arguments import integer
+from balltrack.common.arguments import ArgumentParser, integer
 from balltrack.common.config import ConfigError, load_config
+from balltrack.common.terminal import exit_with
 from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.sim import Simulation
 
@@ -44,8 +43,9 @@ def benchmark(config: SimulatorConfig, frames: int = 150) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Benchmark the simulator core: "
-                                                 "python -m balltrack.services.simulator.benchmark --frames 150")
+    parser = ArgumentParser(prog="python -m balltrack.services.simulator.benchmark",
+                            description="Benchmark the simulator core: "
+                                        "python -m balltrack.services.simulator.benchmark --frames 150")
     parser.add_argument("--frames", type=integer(minimum=1), default=150, help="frames per measurement (default 150)")
     parser.add_argument("--config", default=None, help="a parameter file with a [simulator] section")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a parameter, repeatable")
@@ -62,4 +62,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main)

@@ -6,6 +6,7 @@ content, a liveliness token, a line of output) with a deadline.
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -148,3 +149,41 @@ def test_example_subscriber_prints_ball_positions(router, session, tmp_path):
         publisher.undeclare()
     finally:
         example.kill()
+
+
+def test_example_subscriber_in_a_pipe_ends_quietly_when_the_reader_goes(router, session, tmp_path):
+    # `subscribe_ball3d.py | head -2`: the example prints from Zenoh's thread, where a closed
+    # pipe must still end the program (not leave it listening for ever).
+    example = subprocess.Popen([sys.executable, str(REPO / "examples" / "subscribe_ball3d.py"), "--connect",
+                                router.endpoint], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               env=process_environment())
+    try:
+        assert example.stdout.readline().startswith(b"listening on detected_ball_3d")
+        publisher = session.declare_publisher("detected_ball_3d")
+        ball = {"header": {**header(123, 7), "frame_id": "camera_optical"},
+                "x": 0.1, "y": 0.05, "z": 1.5, "distance": 1.504}
+        line = b""
+        deadline = time.monotonic() + 20
+        # (its subscription reaches the router asynchronously: publish until it prints)
+        while not line:
+            assert time.monotonic() < deadline, "the example printed no ball"
+            publisher.put(encode("Ball3D", ball))
+            ready, _, _ = select.select([example.stdout], [], [], 0.1)
+            if ready:
+                line = example.stdout.readline()
+        assert line.startswith(b"seq      7")
+        example.stdout.close()
+        deadline = time.monotonic() + 20
+        while example.poll() is None:
+            assert time.monotonic() < deadline, "the example went on after its reader left"
+            publisher.put(encode("Ball3D", ball))
+            try:
+                example.wait(0.1)
+            except subprocess.TimeoutExpired:
+                pass
+        assert example.returncode == 0
+        assert example.stderr.read() == b""
+        publisher.undeclare()
+    finally:
+        example.kill()
+        example.wait(5)
