@@ -12,6 +12,8 @@ import glob
 import os
 import sys
 
+from balltrack.common.arguments import number
+
 
 def command_calibrate(args) -> int:
     import cv2
@@ -59,7 +61,7 @@ def register(commands) -> None:
                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("images", nargs="+", metavar="IMAGE", help="photos of the board (or glob patterns)")
     parser.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
-    parser.add_argument("--square", type=float, required=True, help="side of one square (metres)")
+    parser.add_argument("--square", type=number(above=0), required=True, help="side of one square (metres)")
     parser.add_argument("-o", "--output", default="camera.yaml", help="the YAML file to write (default camera.yaml)")
     parser.add_argument("--name", default="camera", help="camera_name written in the file")
     parser.set_defaults(handler=command_calibrate)

@@ -19,6 +19,7 @@ from datetime import datetime, timezone
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.common.arguments import number
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
@@ -54,10 +55,6 @@ def _when(nanoseconds: int | None) -> str:
 
 
 def command_record(args) -> int:
-    if args.duration is not None and args.duration <= 0:
-        return _fail(args, "--duration: must be > 0 seconds", 2)
-    if args.progress < 0:
-        return _fail(args, "--progress: must be >= 0 seconds", 2)
     if not 0 <= args.hold <= 10:
         return _fail(args, "--hold: must be 0 to 10 seconds", 2)
     if not 0 <= args.nice <= 19:
@@ -114,10 +111,6 @@ def command_record(args) -> int:
 
 
 def command_play(args) -> int:
-    if args.rate < 0:
-        return _fail(args, "--rate: must be >= 0 (0 = as fast as possible)", 2)
-    if args.start < 0:
-        return _fail(args, "--start: must be >= 0 seconds", 2)
     recording = _open(args)
     if isinstance(recording, int):
         return recording
@@ -213,12 +206,12 @@ def register(commands) -> None:
                         help="the file to write (replaced if it exists)")
     record.add_argument("keys", nargs="*", metavar="KEY",
                         help="keys or key expressions (default: every data and stats key)")
-    record.add_argument("--duration", type=float, default=None, metavar="S",
+    record.add_argument("--duration", type=number(above=0), default=None, metavar="S",
                         help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
     record.add_argument("--no-foxglove", action="store_true",
                         help="only the msgpack channels (default: also Foxglove-typed channels "
                              "for viewing, when foxglove-sdk is installed)")
-    record.add_argument("--progress", type=float, default=0.0, metavar="S",
+    record.add_argument("--progress", type=number(minimum=0), default=0.0, metavar="S",
                         help="print the messages written so far every S seconds on stderr")
     record.add_argument("--hold", type=float, default=0.0, metavar="S",
                         help="leave each message S seconds after it arrives before compressing "
@@ -232,12 +225,12 @@ def register(commands) -> None:
     # No namespace given: the recorded keys as they were; --namespace NS moves them under NS.
     replay.set_defaults(namespace=None)
     replay.add_argument("file", metavar="FILE.mcap")
-    replay.add_argument("--rate", type=float, default=1.0,
+    replay.add_argument("--rate", type=number(minimum=0), default=1.0,
                         help="speed factor of the recorded timing; 0 = as fast as possible")
     replay.add_argument("--loop", action="store_true", help="start again at the end, until stopped")
     replay.add_argument("--keys", nargs="+", metavar="K", default=None,
                         help="play only these keys (as recorded, with or without namespace)")
-    replay.add_argument("--start", type=float, default=0.0, metavar="S",
+    replay.add_argument("--start", type=number(minimum=0), default=0.0, metavar="S",
                         help="skip the first S seconds of the recording")
     info = commands.add_parser("info", help="what a recording holds (keys, types, counts, rates)",
                                description="what a recording holds, as `ros2 bag info`")

@@ -9,6 +9,7 @@ password, access control): see ``deploy/secure.py``. Then ``balltrack router --s
 import argparse
 import sys
 
+from balltrack.common.arguments import integer
 from balltrack.deploy.secure import DEFAULT_PORT, ROLES, ProfileError, init_profile, parse_hosts
 
 
@@ -46,6 +47,6 @@ def register(commands) -> None:
     init.add_argument("--no-localhost", action="store_true",
                       help="router certificates name only the hosts, not localhost/127.0.0.1 "
                            "(then every client dials a host name)")
-    init.add_argument("--days", type=int, default=825, help="certificate lifetime (default 825)")
+    init.add_argument("--days", type=integer(minimum=1), default=825, help="certificate lifetime (default 825)")
     init.add_argument("--force", action="store_true", help="replace an existing profile (new keys, passwords)")
     init.set_defaults(handler=command_init, roles=list(ROLES))

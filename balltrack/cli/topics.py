@@ -14,6 +14,7 @@ import msgpack
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.common.arguments import integer, number
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, decode
@@ -193,20 +194,20 @@ def command_delay(args) -> int:
 def register(commands) -> None:
     echo = networked(commands, "echo", "print decoded messages of a key", command_echo)
     echo.add_argument("key")
-    echo.add_argument("--count", type=int, default=0, help="stop after N messages")
+    echo.add_argument("--count", type=integer(minimum=0), default=0, help="stop after N messages")
     echo.add_argument("--type", choices=sorted(SCHEMAS),
                       help="message type (default: from the key table)")
     hz = networked(commands, "hz", "measure the rate of a key", command_hz)
     hz.add_argument("key")
-    hz.add_argument("--window", type=float, default=2.0, help="seconds per report")
-    hz.add_argument("--count", type=int, default=0, help="stop after N reports")
+    hz.add_argument("--window", type=number(above=0), default=2.0, help="seconds per report")
+    hz.add_argument("--count", type=integer(minimum=0), default=0, help="stop after N reports")
     for name, help_text, handler in (("bw", "measure a key's bandwidth, as ros2 topic bw", command_bw),
                                      ("delay", "age of a key's header stamps, as ros2 topic delay",
                                       command_delay)):
         sub = networked(commands, name, help_text, handler)
         sub.add_argument("key")
-        sub.add_argument("--window", type=float, default=2.0, help="seconds per report")
-        sub.add_argument("--count", type=int, default=0, help="stop after N reports")
+        sub.add_argument("--window", type=number(above=0), default=2.0, help="seconds per report")
+        sub.add_argument("--count", type=integer(minimum=0), default=0, help="stop after N reports")
         if name == "delay":
             sub.add_argument("--use-sim-time", action="store_true",
                              help="compare with the newest `clock` message (simulated stamps)")
