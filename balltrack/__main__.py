@@ -1,4 +1,5 @@
-from balltrack.cli import main
-from balltrack.common.terminal import exit_with
+import sys
 
-exit_with(main)
+from balltrack.cli import main
+
+sys.exit(main())

@@ -1,13 +1,16 @@
-"""Printing from a command that may sit in a pipe (``... | head -3``).
+"""Printing from a command that may sit in a pipe (``... | head -3``), and ending a command that a
+signal stops.
 
 When the reader goes away, writing raises BrokenPipeError. The command should then stop as if
 asked to and exit 0 without a traceback: Python would otherwise report the error again when it
 flushes stdout at exit. ``balltrack``'s commands (``balltrack/cli/output.py``) print through
-these; every module run with ``python -m`` ends through ``exit_with``.
+these; every module run with ``python -m`` ends through ``exit_with``, ``balltrack experiment``
+through ``interruptible``.
 """
 
 import os
 import sys
+from pathlib import Path
 from typing import Callable, NoReturn
 
 
@@ -30,13 +33,27 @@ def print_lines(lines: list[str]) -> bool:
         return False
 
 
-def exit_with(main: Callable[[], int]) -> NoReturn:
-    """Run a command's ``main`` and exit with its status: what a module run with ``python -m``
-    does under ``if __name__ == "__main__"``. A reader that went away (``| head``) ends the
-    command quietly with status 0, wherever in ``main`` the write was."""
+def interruptible(main: Callable[[], int], name: str) -> int:
+    """``main()``'s status, for a command that may sit in a pipe and may be stopped by a signal.
+
+    A reader that went away (``| head``) ends the command quietly with status 0, wherever in
+    ``main`` the write was. SIGTERM ends it as Ctrl-C does (``shutdown.terminate_as_interrupt``):
+    the cleanup on the way out runs (child processes stopped, sessions closed, temporary
+    folders removed), then one line ``NAME: stopped by a signal`` and status 1, no result."""
+    from balltrack.common.shutdown import terminate_as_interrupt
+
     try:
-        status = main()
+        with terminate_as_interrupt():
+            return main()
     except BrokenPipeError:
         silence_closed_stdout()
-        status = 0
-    sys.exit(status)
+        return 0
+    except KeyboardInterrupt:
+        print(f"{name}: stopped by a signal", file=sys.stderr)
+        return 1
+
+
+def exit_with(main: Callable[[], int]) -> NoReturn:
+    """Run a command's ``main`` (see ``interruptible``) and exit with its status: what a module
+    run with ``python -m`` does under ``if __name__ == "__main__"``."""
+    sys.exit(interruptible(main, Path(sys.argv[0]).stem))

@@ -10,13 +10,13 @@ from balltrack.common.waiting import poll_until
 
 
 class Command:
-    """``python -m balltrack ARGUMENTS`` as a child process, its output (stdout and stderr) in
-    ``log``; waits on what it prints."""
+    """``python -m balltrack ARGUMENTS`` (or another ``module`` of the package) as a child
+    process, its output (stdout and stderr) in ``log``; waits on what it prints."""
 
-    def __init__(self, arguments: list[str], log: Path):
+    def __init__(self, arguments: list[str], log: Path, module: str = "balltrack"):
         self.log = log
         self._file = open(log, "wb")
-        self.popen = subprocess.Popen([sys.executable, "-m", "balltrack", *arguments], stdout=self._file,
+        self.popen = subprocess.Popen([sys.executable, "-m", module, *arguments], stdout=self._file,
                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         self.pid = self.popen.pid
 

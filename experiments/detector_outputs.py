@@ -30,7 +30,6 @@ import numpy as np
 from balltrack.common.arguments import ArgumentParser, integer
 from balltrack.common.messages import MessageError
 from balltrack.common.recording import RecordingError
-from balltrack.common.shutdown import terminate_as_interrupt
 from balltrack.common.terminal import exit_with, print_lines
 
 FORMAT = "balltrack detector outputs 1"
@@ -145,16 +144,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.action == "record" and not (args.photos or args.recording or args.renders):
         parser.error("record needs frames: --photos, --recording and/or --renders")
-    # SIGTERM ends a run as Ctrl-C does: one line, status 1, nothing written
+    # (SIGTERM ends a run as Ctrl-C does, see exit_with: one line, status 1, nothing written)
     try:
-        with terminate_as_interrupt():
-            status, report = record_or_compare(args)
+        status, report = record_or_compare(args)
     except (OSError, RecordingError, MessageError) as error:
         print(f"detector_outputs: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("detector_outputs: stopped by a signal", file=sys.stderr)
-        return 1
     print_lines(report)  # (quietly, when the reader has gone: `| head`)
     return status
 

@@ -36,7 +36,6 @@ from pathlib import Path
 from balltrack.common.arguments import ArgumentParser, integer, number
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.session import client_config
-from balltrack.common.shutdown import terminate_as_interrupt
 from balltrack.common.terminal import exit_with, print_lines
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.launcher import start_system
@@ -230,15 +229,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.subscriber:
         return subscriber(args.subscriber, args.shared_memory == "on", args.expect)
     keep_freed_memory()  # as the services that publish every frame do (common/memory.py)
-    # SIGTERM ends a run as Ctrl-C does: the subscribers and the router are stopped on the way out.
+    # (SIGTERM ends a run as Ctrl-C does, see exit_with: the subscribers and the router are
+    # stopped on the way out)
     try:
-        with terminate_as_interrupt():
-            results = run_all(args)
+        results = run_all(args)
     except (RuntimeError, OSError) as error:
         print(f"frame_transport: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("frame_transport: stopped by a signal; no figures", file=sys.stderr)
         return 1
     lines = [f"put -> subscriber callback over a router on this host, {args.count} messages at "
              f"{args.rate:g} Hz to each of {args.subscribers} subscriber processes:",

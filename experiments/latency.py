@@ -23,8 +23,8 @@ Example::
 """
 
 import json
-import subprocess
-import sys
+
+from balltrack.deploy.command import Command
 
 NAME = "latency"
 TITLE = "Reaction time in the demo (frame to 3D position and to command)"
@@ -40,10 +40,13 @@ EVENT_RUNS = 3
 
 def run_demo(run_dir, extra: list[str], time_limit: float) -> dict:
     """The demo's summary.json after one run in ``run_dir``."""
-    command = [sys.executable, "-m", "balltrack.deploy.demo", "--no-video", "--port", "0",
-               "--run-dir", str(run_dir), "--time-limit", f"{time_limit:g}", *extra]
-    with open(run_dir.parent / f"{run_dir.name}.log", "w") as log:
-        subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, check=False)
+    demo = Command(["--no-video", "--port", "0", "--run-dir", str(run_dir), "--time-limit", f"{time_limit:g}",
+                    *extra], run_dir.parent / f"{run_dir.name}.log", module="balltrack.deploy.demo")
+    try:
+        demo.popen.wait()
+    finally:
+        # (interrupted: SIGTERM lets the demo stop the system it started, as its Ctrl-C does)
+        demo.stop(timeout=60)
     summary = run_dir / "summary.json"
     if not summary.is_file():
         raise RuntimeError(f"the demo wrote no {summary} (see {run_dir.parent / run_dir.name}.log)")

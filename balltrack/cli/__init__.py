@@ -28,13 +28,14 @@ from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.common.keys import Keys
 from balltrack.common.arguments import ArgumentParser
-from balltrack.common.terminal import silence_closed_stdout
+from balltrack.common.terminal import interruptible, silence_closed_stdout
 
 
 def _experiment(arguments: list[str]) -> int:
     from balltrack.experiments.cli import main as experiment_main
 
-    return experiment_main(arguments)
+    # (SIGTERM as Ctrl-C: the demos, routers and services an experiment started are stopped)
+    return interruptible(lambda: experiment_main(arguments), "balltrack experiment")
 
 
 def _deploy(arguments: list[str]) -> int:

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from balltrack.common.messages import encode, header
+from balltrack.deploy.supervisor import pid_alive
 from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment, wait_until
 
 SERVICES = ["detector", "locator", "follower"]
@@ -38,17 +39,6 @@ def read_status(run_dir: Path) -> dict:
         return {}
 
 
-def pid_running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 @pytest.fixture
 def started(tmp_path):
     """Router + detector + locator + follower under a background supervisor; stopped at the end."""
@@ -59,7 +49,7 @@ def started(tmp_path):
     assert result.returncode == 0, result.stdout + result.stderr
     yield run_dir, endpoint
     supervisor = read_status(run_dir).get("supervisor", {}).get("pid")
-    if supervisor and pid_running(supervisor):  # the test failed before its own stop
+    if supervisor and pid_alive(supervisor):  # the test failed before its own stop
         deploy("stop", "--run-dir", str(run_dir))
 
 
@@ -103,7 +93,7 @@ def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
     for name, child in final["children"].items():
         assert child["state"] == "stopped" and child["last_exit"] == 0, (name, child)
     assert not list(run_dir.glob("*.pid"))
-    assert not [pid for pid in pids if pid_running(pid)]
+    assert not [pid for pid in pids if pid_alive(pid)]
     # The locator's log holds both runs.
     assert (run_dir / "locator.log").read_text().count("=== ") == 2
 

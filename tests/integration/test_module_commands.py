@@ -1,17 +1,20 @@
 """The modules a user runs with ``python -m`` (experiments, benchmarks, the demo, the README's
-parameter tables): each refuses a bad argument with one line and status 2, and ends quietly
-with status 0 when the reader of its output is gone (``... | head``), as ``balltrack``'s own
-commands do."""
+parameter tables): each refuses a bad argument with one line and status 2, ends quietly with
+status 0 when the reader of its output is gone (``... | head``), as ``balltrack``'s own
+commands do, and a SIGTERM stops it as Ctrl-C does, with the processes it started."""
 
 import os
 import re
+import signal
 import subprocess
 import sys
 import tomllib
+from pathlib import Path
 
 import pytest
 
-from tests.harness import REPO, process_environment
+from balltrack.deploy.supervisor import pid_alive
+from tests.harness import REPO, Process, process_environment, wait_until
 from tests.unit.test_real_photos import write_set
 
 MAIN_BLOCK = 'if __name__ == "__main__":'
@@ -79,3 +82,47 @@ def test_the_example_subscriber_refuses_a_bad_argument_in_one_line(arguments):
                               capture_output=True, text=True, timeout=60)
     assert finished.returncode == 2
     assert len(finished.stderr.strip().splitlines()) == 1, finished.stderr
+
+
+def descendants(pid: int) -> set[int]:
+    """The processes below ``pid`` (Linux: /proc/PID/task/*/children)."""
+    found = set()
+    for children in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            for child in map(int, children.read_text().split()):
+                found |= {child, *descendants(child)}
+        except OSError:  # (a thread or child that ended meanwhile)
+            pass
+    return found
+
+
+def command_line(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+@pytest.mark.parametrize("arguments, started", [
+    # (a camera service at 30 frames/s; SIGTERM used to leave it running for ever)
+    (["-m", "balltrack.experiments.io_throughput", "--seconds", "60"], "run camera"),
+    # (a demo: its recorder, and its router, simulator and services under its supervisor; SIGTERM
+    # used to leave them running, and killing the demo instead of stopping it, its recorder)
+    (["-m", "balltrack", "experiment", "latency", "--quick", "--out", "OUT"], "balltrack record"),
+])
+def test_sigterm_stops_a_command_with_what_it_started(tmp_path, arguments, started):
+    command = Process([sys.executable, *(str(tmp_path) if word == "OUT" else word for word in arguments)],
+                      tmp_path / "command.log")
+
+    def started_below() -> set[int] | None:
+        found = descendants(command.popen.pid)
+        return found if any(started in command_line(pid) for pid in found) else None
+
+    try:
+        below = wait_until(started_below, 120, f"a process {started!r} below the command", command)
+        assert command.stop(timeout=120) == 1
+        assert command.output().splitlines()[-1].endswith(": stopped by a signal"), command.output()[-2000:]
+        # (the command waited for what it stopped; a grandchild may take a moment to be reaped)
+        wait_until(lambda: not any(pid_alive(pid) for pid in below), 30, "the processes it started to end")
+    finally:
+        command.kill()
