@@ -88,11 +88,22 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
     logging.basicConfig(level=args.log_level, format=LOG_FORMAT, stream=sys.stderr)
     try:
         config = load_config(config_class, args.config, args.overrides, section=name)
+        preflight(config)
         Keys(args.namespace)
     except (ConfigError, ValueError) as error:
         print(f"{name}: {error}", file=sys.stderr)
         return 2
     return serve(name, args, [(name, config, build)])
+
+
+def preflight(config) -> None:
+    """Check what a service's settings name outside it (a camera's video file or calibration)
+    before its session opens: a missing file is then one line and status 2 at once, not after a
+    router answers. A config class opts in with a ``preflight()`` method raising ConfigError;
+    this is not part of its validation, which describing settings and live changes run too."""
+    check = getattr(config, "preflight", None)
+    if check is not None:
+        check()
 
 
 def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Callable | None]]],
@@ -133,6 +144,8 @@ def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Calla
         overrides = settings_by_service(args.overrides, names, f"this process's {', '.join(names)}")
         configs = [load_config(config_class, files.get(name), overrides[name], section=name)
                    for name, config_class, _ in services]
+        for config in configs:
+            preflight(config)
         Keys(args.namespace)
     except (ConfigError, ValueError) as error:
         print(f"{label}: {error}", file=sys.stderr)

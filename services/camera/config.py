@@ -54,6 +54,19 @@ class CameraConfig:
         if (self.width == 0) != (self.height == 0):
             raise ConfigError(f"width/height: give both or neither, got {self.width}x{self.height}")
 
+    def preflight(self) -> None:
+        """The source names something that exists and the calibration file reads (see
+        ``common.runner.preflight``); the service opens both again when it starts."""
+        from balltrack.services.camera.calibration import read_calibration
+        from balltrack.services.camera.source import SourceError, parse_source
+
+        try:
+            parse_source(self.source)
+            if self.calibration:
+                read_calibration(self.calibration)
+        except (SourceError, ValueError) as error:
+            raise ConfigError(str(error)) from None
+
 
 # What a running camera can change through camera/config; the rest takes a restart.
 LIVE_SETTINGS = {"rate_hz", "loop", "encoding", "jpeg_quality"}

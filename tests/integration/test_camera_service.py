@@ -7,7 +7,7 @@ import pytest
 
 from balltrack.common.images import image_to_bgr
 from balltrack.services.camera.calibration import CameraModel, write_calibration
-from tests.harness import Collector, query_config, start_service
+from tests.harness import Collector, free_port, query_config, start_service
 
 WIDTH, HEIGHT = 320, 240
 CALIBRATION = CameraModel(WIDTH, HEIGHT, 300.0, 301.0, 158.0, 121.0, (-0.2, 0.05, 0.001, 0.0, 0.0), "bench")
@@ -121,6 +121,20 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
     errors = [line for line in process.output().splitlines() if line.startswith("camera: ")]
     assert len(errors) == 1 and errors[0].startswith(expected), process.output()
     assert "Traceback" not in process.output()
+
+
+@pytest.mark.parametrize("name, overrides, expected", [
+    ("camera", ("source=/nonexistent/clip.mp4",), "camera: source: no such file, folder, device or URL"),
+    ("camera", ("calibration=/nonexistent.yaml",), "camera: /nonexistent.yaml: cannot read"),
+    ("camera+detector", ("camera.source=/nonexistent/clip.mp4",), "camera+detector: source: no such file"),
+])
+def test_a_missing_file_exits_2_before_a_router_answers(tmp_path, name, overrides, expected):
+    # Nobody listens there: a service waits for its router, but not to report a typo in a path.
+    arguments = [item for override in overrides for item in ("--set", override)]
+    process = start_service(name, f"tcp/127.0.0.1:{free_port()}", tmp_path, *arguments)
+    assert process.popen.wait(60) == 2, process.output()
+    assert process.output().strip().startswith(expected), process.output()
+    assert len(process.output().strip().splitlines()) == 1, process.output()
 
 
 def test_unreadable_photos_are_skipped_and_counted(session, launch, photos):
