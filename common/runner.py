@@ -32,7 +32,7 @@ from balltrack.common.config import (ConfigError, config_to_dict, describe_confi
 from balltrack.common.context import ServiceContext
 from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
-from balltrack.common.session import (SessionOpenError, add_session_arguments, close_session,
+from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
                                       open_from_args, peer_conflict)
 from balltrack.common.shutdown import stop_on_signals
 
@@ -168,7 +168,10 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
             opened["session"] = open_from_args(args)
         except SessionOpenError as error:
             opened["error"] = error
-        opened["done"] = True
+        except ZenohConfigError as error:  # (a bad --connect or --zenoh-config: not worth waiting for)
+            opened["refused"] = error
+        finally:
+            opened["done"] = True
 
     threading.Thread(target=open_session, name=f"{label}-open", daemon=True).start()
     while "done" not in opened and not stop.wait(0.1):
@@ -176,6 +179,9 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
     if "error" in opened:
         print(f"{label}: {opened['error']}", file=sys.stderr)
         return 1
+    if "refused" in opened:
+        print(f"{label}: {opened['refused']}", file=sys.stderr)
+        return 2
     if "session" not in opened:
         logging.getLogger(label).info("stopped before a router answered")
         os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined

@@ -18,6 +18,7 @@ alternated runs). Secure setups stay clients.
 import argparse
 import json
 import os
+import re
 from pathlib import Path
 
 DEFAULT_PORT = 7447
@@ -80,8 +81,36 @@ def peer_conflict(args) -> str | None:
     return None
 
 
-def _insert(config, key: str, value) -> None:
-    config.insert_json5(key, json.dumps(value))
+class ZenohConfigError(ValueError):
+    """A Zenoh setting that Zenoh refuses (a config file, an endpoint); the message is one line
+    naming the option it came from."""
+
+
+def zenoh_reason(error: Exception) -> str:
+    """The reason in one of Zenoh's multi-line errors, on one line: its message without the
+    source locations and the ``Json5Err(Message { msg: ...`` wrapping, after the line and
+    column of a config file it points into (as ``line 2, column 9: ...``)."""
+    text = re.sub(r" at /\S+\.rs:\d+\.?", "", str(error)).strip()
+    message = (re.search(r'msg: "(.*?)"(?:, location|\s*\})', text, re.S)
+               or re.search(r"^\s*= (.+)$", text, re.M))
+    reason = message.group(1).strip() if message else (text.splitlines() or [type(error).__name__])[0]
+    position = (re.search(r"^\s*--> (\d+):(\d+)", text, re.M)
+                or re.search(r"Location \{ line: (\d+), column: (\d+)", text))
+    if position and "Endpoints must be" not in reason:
+        reason = f"line {position.group(1)}, column {position.group(2)}: {reason}"
+    return reason
+
+
+def _insert(config, key: str, value, option: str | None = None) -> None:
+    """Set ``key``; a value Zenoh refuses is a ZenohConfigError naming ``option`` (the command's
+    option it came from), so that a typo is one line, not a traceback."""
+    import zenoh
+
+    try:
+        config.insert_json5(key, json.dumps(value))
+    except zenoh.ZError as error:
+        shown = ", ".join(map(str, value)) if isinstance(value, list) else value
+        raise ZenohConfigError(f"{option or key} {shown}: {zenoh_reason(error)}") from None
 
 
 def _common_settings(config) -> None:
@@ -95,7 +124,10 @@ def load_config_file(path: str | Path):
     relative to the file's own folder, so a profile folder works from anywhere."""
     import zenoh
 
-    config = zenoh.Config.from_file(str(path))
+    try:
+        config = zenoh.Config.from_file(str(path))
+    except zenoh.ZError as error:
+        raise ZenohConfigError(f"{path}: {zenoh_reason(error)}") from None
     for setting in SECURE_FILE_SETTINGS:
         value = json.loads(config.get_json(setting))
         if isinstance(value, str) and value and not os.path.isabs(value):
@@ -148,7 +180,7 @@ def client_config(endpoints: list[str] | None = None, zenoh_config_file: str | N
         # (a peer opens without its router by default; like a client, give up instead)
         _insert(config, "connect/exit_on_failure", True)
     if endpoints or not zenoh_config_file:
-        _insert(config, "connect/endpoints", list(endpoints or default_endpoints()))
+        _insert(config, "connect/endpoints", list(endpoints or default_endpoints()), "--connect")
     timeout = DEFAULT_OPEN_TIMEOUT if open_timeout is None else open_timeout
     _insert(config, "connect/timeout_ms", -1 if timeout < 0 else int(timeout * 1000))
     return config
@@ -168,9 +200,9 @@ def router_config(listen: list[str], connect: list[str] | None = None,
         # Routers keep retrying their peers forever, so a cluster heals after a restart.
         _insert(config, "connect/timeout_ms", -1)
     if listen:
-        _insert(config, "listen/endpoints", list(listen))
+        _insert(config, "listen/endpoints", list(listen), "--listen")
     if connect:
-        _insert(config, "connect/endpoints", list(connect))
+        _insert(config, "connect/endpoints", list(connect), "--connect")
     return config
 
 
@@ -178,16 +210,10 @@ class SessionOpenError(RuntimeError):
     pass
 
 
-def first_error_line(error: Exception) -> str:
-    """Zenoh's errors are multi-line and end with a source location; keep the reason."""
-    lines = str(error).strip().splitlines()
-    return lines[0].split(" at /")[0] if lines else type(error).__name__
-
-
 def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | None = None,
                  open_timeout: float | None = None, peer: bool = False):
     """Open a client (or ``peer``) session; SessionOpenError with a one-line reason if no
-    router answers."""
+    router answers, ZenohConfigError if Zenoh refuses a setting."""
     import zenoh
 
     config = client_config(endpoints, zenoh_config_file, open_timeout, peer)
@@ -195,8 +221,7 @@ def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | No
         return zenoh.open(config)
     except Exception as error:  # zenoh raises ZError with a multi-line message
         where = ", ".join(endpoints or default_endpoints())
-        first_line = first_error_line(error)
-        raise SessionOpenError(f"cannot reach a Zenoh router at {where}: {first_line}") from None
+        raise SessionOpenError(f"cannot reach a Zenoh router at {where}: {zenoh_reason(error)}") from None
 
 
 def close_session(session) -> str | None:
@@ -212,7 +237,7 @@ def close_session(session) -> str | None:
     try:
         session.close()
     except zenoh.ZError as error:
-        return f"the router was not told that this session closed ({first_error_line(error)}); " \
+        return f"the router was not told that this session closed ({zenoh_reason(error)}); " \
                "it forgets the session when its lease ends"
     return None
 

@@ -27,6 +27,7 @@ from balltrack.cli import (calibrate, config, introspect, network, offline, publ
 from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.common.keys import Keys
+from balltrack.common.session import client_config
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import interruptible, silence_closed_stdout
 
@@ -77,6 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "namespace", None) is not None:
         try:
             Keys(args.namespace)
+            if args.command != "router":  # (the router builds a router's config, see network.py)
+                # Zenoh refuses a bad --connect endpoint or --zenoh-config file when the
+                # config is built: a bad argument, said before the command starts its work.
+                client_config(getattr(args, "connect", None), getattr(args, "zenoh_config", None))
         except ValueError as error:
             print(f"balltrack {args.command}: {error}", file=sys.stderr)
             return 2

@@ -8,7 +8,8 @@ from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.messages import SIM_OPS
-from balltrack.common.session import DEFAULT_PORT, first_error_line, router_config, secure_router_path
+from balltrack.common.session import (DEFAULT_PORT, ZenohConfigError, router_config, secure_router_path,
+                                      zenoh_reason)
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.common.status import service_status
 
@@ -27,11 +28,15 @@ def command_router(args) -> int:
     listen = args.listen or ([] if zenoh_config else [f"tcp/0.0.0.0:{DEFAULT_PORT}"])
     try:
         config = router_config(listen, args.connect, zenoh_config)
+    except ZenohConfigError as error:
+        print(f"balltrack router: {error}", file=sys.stderr)
+        return 2
+    try:
         listen = listen or json.loads(config.get_json("listen/endpoints"))
         session = zenoh.open(config)
     except Exception as error:
         print(f"balltrack router: cannot listen on {', '.join(map(str, listen)) or 'its endpoints'}: "
-              f"{first_error_line(error)}", file=sys.stderr)
+              f"{zenoh_reason(error)}", file=sys.stderr)
         return 1
     # The endpoints as given, then where they are reached when that differs: the port the
     # system chose for port 0, each interface's address for 0.0.0.0.

@@ -3,7 +3,8 @@
 import sys
 
 from balltrack.common.arguments import number
-from balltrack.common.session import SessionOpenError, add_session_arguments, close_session, open_from_args
+from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
+                                      open_from_args)
 
 
 def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0, peer: bool = False):
@@ -20,7 +21,7 @@ def open_or_report(args):
     """The session, or None after a one-line reason on stderr."""
     try:
         return open_from_args(args, open_timeout=args.timeout)
-    except SessionOpenError as error:
+    except (SessionOpenError, ZenohConfigError) as error:
         print(f"balltrack {args.command}: {error}", file=sys.stderr)
         return None
 

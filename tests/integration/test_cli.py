@@ -117,6 +117,13 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["pub", "detected_ball", "{}", "--rate", "inf"], "--rate: must be a finite number"),
     (["secure", "init", "profile", "--hosts", "a", "--days", "0"], "--days: must be at least 1"),
     (["calibrate", "x.png", "--square", "0"], "--square: must be greater than 0"),
+    # (what Zenoh refuses: one line naming the option, before any router is sought)
+    (["echo", "detected_ball", "--connect", "tcp-127.0.0.1"], "--connect tcp-127.0.0.1: Endpoints must be of the form"),
+    (["record", "-o", "x.mcap", "--zenoh-config", "missing.json5"], "missing.json5: No such file or directory"),
+    (["hz", "detected_ball", "--zenoh-config", "README.md"], "README.md: Unsupported file type"),
+    (["router", "--listen", "7447"], "--listen 7447: Endpoints must be of the form"),
+    (["run", "locator", "--connect", "localhost:7447"], "locator: --connect localhost:7447: Endpoints must be"),
+    (["run", "detector+locator", "--zenoh-config", "missing.json5"], "detector+locator: missing.json5: No such file"),
     (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
