@@ -27,9 +27,9 @@ from pathlib import Path
 from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
-from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, close_session,
-                                      default_endpoints, load_config_file, secure_client_path,
-                                      secure_router_path)
+from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
+                                      default_endpoints, load_config_file, router_config,
+                                      secure_client_path, secure_router_path)
 from balltrack.common.status import service_status
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
@@ -86,6 +86,11 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
     if args.secure and (args.router_config or args.zenoh_config):
         raise LaunchError("--secure names the Zenoh configs itself: no --router-config or --zenoh-config with it")
     listen = args.listen or (secure_listen(args.secure, args.host) if args.secure and args.router else [DEFAULT_LISTEN])
+    # An endpoint or config file that Zenoh refuses is a bad argument (ZenohConfigError, a
+    # ValueError), said before anything starts.
+    if args.router:
+        router_config(listen, args.router_connect, args.router_config)
+    client_config(args.connect, args.zenoh_config)
     return make_specs(services, parse_service_overrides(args.overrides, services), router=args.router,
                       listen=listen, router_connect=args.router_connect,
                       router_config=args.router_config, connect=args.connect,

@@ -124,6 +124,8 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["router", "--listen", "7447"], "--listen 7447: Endpoints must be of the form"),
     (["run", "locator", "--connect", "localhost:7447"], "locator: --connect localhost:7447: Endpoints must be"),
     (["run", "detector+locator", "--zenoh-config", "missing.json5"], "detector+locator: missing.json5: No such file"),
+    (["deploy", "start", "--router", "--listen", "foo"], "deploy start: --listen foo: Endpoints must be"),
+    (["deploy", "start", "--services", "locator", "--zenoh-config", "missing.json5"], "deploy start: missing.json5: No such"),
     (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
