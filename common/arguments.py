@@ -38,8 +38,8 @@ def number(minimum: float | None = None, above: float | None = None) -> Callable
     return parse
 
 
-def integer(minimum: int | None = None) -> Callable[[str], int]:
-    """A whole number, at least ``minimum`` (when given)."""
+def integer(minimum: int | None = None, maximum: int | None = None) -> Callable[[str], int]:
+    """A whole number, at least ``minimum`` and at most ``maximum`` (when given)."""
     def parse(text: str) -> int:
         try:
             value = int(text)
@@ -47,5 +47,7 @@ def integer(minimum: int | None = None) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
         if minimum is not None and value < minimum:
             raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}, got {text}")
         return value
     return parse

@@ -41,10 +41,10 @@ from pathlib import Path
 import numpy as np
 
 from balltrack.common import keys as key_table
-from balltrack.common.arguments import ArgumentParser, number
+from balltrack.common.arguments import ArgumentParser, integer, number
 from balltrack.common.keys import Keys
 from balltrack.common.referee import HOLD_SECONDS, REACH_DISTANCE, REACH_HEADING_DEGREES, Referee, errors
-from balltrack.common.session import close_session, open_session, secure_client_path
+from balltrack.common.session import close_session, open_session, secure_client_path, secure_router_path
 from balltrack.common.shutdown import set_from_signal
 from balltrack.common.terminal import exit_with
 from balltrack.common.waiting import poll_until
@@ -126,7 +126,10 @@ def stop_recording(recorder: Command, run_dir: Path) -> None:
 
 def run(args) -> int:
     run_dir = Path(args.run_dir or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"--run-dir: cannot make {run_dir}: {error.strerror}") from None
     config_dir = Path(args.config_dir).resolve()
     settings = parse_service_overrides(args.overrides, list(SERVICES))
     stop = threading.Event()
@@ -343,7 +346,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--time-limit", type=number(above=0), default=60.0, metavar="SECONDS",
                         help="give up after this many wall seconds of chase (default 60)")
     parser.add_argument("--run-dir", metavar="DIR", help="default runs/demo-YYYYmmdd-HHMMSS")
-    parser.add_argument("--port", type=int, default=7447,
+    parser.add_argument("--port", type=integer(minimum=0, maximum=65535), default=7447,
                         help="the router's port on 127.0.0.1 (a free one if taken, or 0; default 7447)")
     parser.add_argument("--namespace", default="", metavar="NS")
     parser.add_argument("--config-dir", default=str(DEMO_CONFIG), metavar="DIR",
@@ -369,10 +372,22 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
+def check_arguments(args) -> None:
+    """ValueError or LaunchError for an argument that cannot work, before a run folder is made
+    or a process started."""
+    Keys(args.namespace)
+    if not Path(args.config_dir).is_dir():
+        raise ValueError(f"--config-dir: {args.config_dir} is not a directory")
+    parse_service_overrides(args.overrides, list(SERVICES))
+    if args.secure:
+        secure_router_path(args.secure, args.host)
+        secure_client_path(args.secure, "operator")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        Keys(args.namespace)
+        check_arguments(args)
         return run(args)
     except (LaunchError, ValueError) as error:
         print(f"demo: {error}", file=sys.stderr)

@@ -102,6 +102,30 @@ def test_demo_refuses_bad_numbers_before_starting_anything(arguments, reason, ca
     assert reason in capsys.readouterr().err.strip().splitlines()[-1]
 
 
+@pytest.mark.parametrize("arguments, reason", [
+    (["--port", "99999"], "--port: must be at most 65535"),
+    (["--config-dir", "MISSING"], "--config-dir: MISSING is not a directory"),
+    (["--secure", "MISSING"], "--secure: MISSING holds routers for no host"),
+    (["--set", "detector:v_min=3"], "expected SERVICE.KEY=VALUE"),
+    (["--run-dir", "FILE/run"], "--run-dir: cannot make FILE/run"),
+])
+def test_demo_refuses_bad_arguments_before_making_a_run_folder(tmp_path, monkeypatch, capsys, arguments, reason):
+    from balltrack.deploy.demo import main
+
+    monkeypatch.chdir(tmp_path)  # (where a default run folder would be made)
+    (tmp_path / "FILE").write_text("a file, not a folder")
+    replaced = {"MISSING": str(tmp_path / "missing"), "FILE/run": str(tmp_path / "FILE" / "run")}
+    try:
+        status = main([replaced.get(argument, argument) for argument in arguments])
+    except SystemExit as exit_info:  # (argparse's own refusals)
+        status = exit_info.code
+    assert status == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1
+    assert reason in error.replace(str(tmp_path / "missing"), "MISSING").replace(str(tmp_path / "FILE"), "FILE"), error
+    assert not (tmp_path / "runs").exists()
+
+
 def test_deploy_start_wait_0_still_means_do_not_wait():
     from balltrack.deploy.cli import build_parser
 
