@@ -86,17 +86,17 @@ class ZenohConfigError(ValueError):
     naming the option it came from."""
 
 
-def zenoh_reason(error: Exception) -> str:
+def zenoh_reason(error: Exception, in_file: bool = False) -> str:
     """The reason in one of Zenoh's multi-line errors, on one line: its message without the
-    source locations and the ``Json5Err(Message { msg: ...`` wrapping, after the line and
-    column of a config file it points into (as ``line 2, column 9: ...``)."""
+    source locations and the ``Json5Err(Message { msg: ...`` wrapping; ``in_file`` (an error
+    about a config file): after the line and column it points at (``line 2, column 9: ...``)."""
     text = re.sub(r" at /\S+\.rs:\d+\.?", "", str(error)).strip()
     message = (re.search(r'msg: "(.*?)"(?:, location|\s*\})', text, re.S)
                or re.search(r"^\s*= (.+)$", text, re.M))
     reason = message.group(1).strip() if message else (text.splitlines() or [type(error).__name__])[0]
     position = (re.search(r"^\s*--> (\d+):(\d+)", text, re.M)
                 or re.search(r"Location \{ line: (\d+), column: (\d+)", text))
-    if position and "Endpoints must be" not in reason:
+    if in_file and position:
         reason = f"line {position.group(1)}, column {position.group(2)}: {reason}"
     return reason
 
@@ -127,7 +127,7 @@ def load_config_file(path: str | Path):
     try:
         config = zenoh.Config.from_file(str(path))
     except zenoh.ZError as error:
-        raise ZenohConfigError(f"{path}: {zenoh_reason(error)}") from None
+        raise ZenohConfigError(f"{path}: {zenoh_reason(error, in_file=True)}") from None
     for setting in SECURE_FILE_SETTINGS:
         value = json.loads(config.get_json(setting))
         if isinstance(value, str) and value and not os.path.isabs(value):
