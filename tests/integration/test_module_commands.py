@@ -5,7 +5,6 @@ commands do, and a SIGTERM stops it as Ctrl-C does, with the processes it starte
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import tomllib
