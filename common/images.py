@@ -5,6 +5,7 @@ size that disagrees with the message, is rejected without allocating the frame.
 """
 
 import struct
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -40,6 +41,28 @@ def jpeg_size(data: bytes) -> tuple[int, int]:
             return width, height
         position += 2 + segment_length
     raise MessageError("data: corrupt JPEG (no frame header)")
+
+
+class UnreadableImage(ValueError):
+    """A file that ``read_image`` cannot make an image of; the text is the reason."""
+
+
+def read_image(path) -> np.ndarray:
+    """The image file at ``path`` as HxWx3 uint8 BGR; UnreadableImage saying why not (no such
+    file, a folder, not an image OpenCV decodes).
+
+    Read here, then decoded: ``cv2.imread`` gives only None and prints a warning of its own
+    (``[ WARN:0@0.4] global loadsave.cpp ... can't open/read file``) beside the command's error.
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as error:
+        raise UnreadableImage(error.strerror or str(error)) from None
+    # (imdecode asserts on an empty buffer)
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
+    if image is None:
+        raise UnreadableImage("not an image OpenCV decodes")
+    return image
 
 
 def image_to_bgr(message: dict) -> np.ndarray:

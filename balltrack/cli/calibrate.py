@@ -16,7 +16,7 @@ from balltrack.common.arguments import number
 
 
 def command_calibrate(args) -> int:
-    import cv2
+    from balltrack.common.images import UnreadableImage, read_image
 
     from balltrack.services.camera.calibration import calibrate, parse_board, write_calibration
 
@@ -34,9 +34,11 @@ def command_calibrate(args) -> int:
         paths += [path for path in matches if os.path.isfile(path)] or [pattern]
     images = []
     for path in paths:
-        image = cv2.imread(path, cv2.IMREAD_COLOR)
-        if image is None:
-            print(f"{path}: cannot read image", file=sys.stderr)
+        try:
+            image = read_image(path)
+        except UnreadableImage as error:
+            image = None
+            print(f"{path}: cannot read image ({error})", file=sys.stderr)
         images.append((path, image))
     try:
         result = calibrate(images, board, args.square, args.name)

@@ -20,8 +20,7 @@ from balltrack.common.shutdown import stop_on_signals
 
 
 def command_detect(args) -> int:
-    import cv2
-
+    from balltrack.common.images import UnreadableImage, read_image
     from balltrack.services.detector.config import DetectorConfig
     from balltrack.services.detector.detector import BallDetector
     from balltrack.services.detector.explain import explain_place, summary
@@ -38,9 +37,10 @@ def command_detect(args) -> int:
     for path in args.images:
         if stop.is_set():
             break
-        image = cv2.imread(path, cv2.IMREAD_COLOR)
-        if image is None:
-            print(json.dumps({"file": path, "error": "cannot read image"}), flush=True)
+        try:
+            image = read_image(path)
+        except UnreadableImage as error:
+            print(json.dumps({"file": path, "error": f"cannot read image ({error})"}), flush=True)
             status = 1
             continue
         result, judged = detector.detect_judged(image) if places else (detector.detect(image), [])
@@ -69,9 +69,7 @@ def parse_place(text: str) -> tuple[float, float]:
 
 
 def command_fit_colour(args) -> int:
-    import cv2
-    import numpy as np
-
+    from balltrack.common.images import UnreadableImage, read_image
     from balltrack.experiments.real_photos import counted_balls
     from balltrack.services.detector.colour_fit import ColourSamples, colour_samples, fit_colour
     from balltrack.services.detector.config import DetectorConfig
@@ -93,14 +91,10 @@ def command_fit_colour(args) -> int:
             print(f"balltrack fit-colour: stopped by a signal after {len(samples)} of {len(images)} "
                   "images; nothing fitted", file=sys.stderr)
             return 1
-        try:  # (read here: cv2.imread would add a warning of its own to the one-line error)
-            data = path.read_bytes()
-        except OSError as error:
-            return fail(f"{path}: cannot read image ({error.strerror or error})")
-        # (imdecode asserts on an empty buffer)
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
-        if image is None:
-            return fail(f"{path}: cannot read image (not an image OpenCV decodes)")
+        try:
+            image = read_image(path)
+        except UnreadableImage as error:
+            return fail(f"{path}: cannot read image ({error})")
         samples.append(colour_samples(image, counted_balls(marked, min_ball_px=0), config))
     try:
         fit = fit_colour(ColourSamples.joined(samples), config)

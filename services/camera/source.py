@@ -20,6 +20,8 @@ from typing import Callable, Iterator
 import cv2
 import numpy as np
 
+from balltrack.common.images import UnreadableImage, read_image
+
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".pnm"}
 # A video whose container does not say its frame rate is played at this rate.
 FALLBACK_VIDEO_RATE_HZ = 30.0
@@ -93,11 +95,12 @@ class ImageFiles:
 
     def read(self) -> np.ndarray | None:
         while self.position < len(self.paths):
-            image = cv2.imread(self.paths[self.position], cv2.IMREAD_COLOR)
+            path = self.paths[self.position]
             self.position += 1
-            if image is not None:
-                return image
-            self.unreadable += 1
+            try:
+                return read_image(path)
+            except UnreadableImage:
+                self.unreadable += 1
         return None
 
     def rewind(self) -> bool:

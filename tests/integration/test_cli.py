@@ -175,10 +175,16 @@ def test_fit_colour_rejects_a_file_that_is_no_image(tmp_path, content):
 def test_unreadable_image_is_reported_not_fatal(tmp_path):
     good = tmp_path / "good.png"
     cv2.imwrite(str(good), floor_image(64, 48))
-    result = balltrack("detect", str(tmp_path / "missing.png"), str(good))
+    (tmp_path / "text.png").write_text("not an image\n")
+    result = balltrack("detect", str(tmp_path / "missing.png"), str(tmp_path / "text.png"), str(tmp_path), str(good))
     assert result.returncode == 1
     lines = [json.loads(line) for line in result.stdout.splitlines()]
-    assert lines[0]["error"] and lines[1]["balls"] == []
+    assert [line.get("error") for line in lines] == [
+        "cannot read image (No such file or directory)", "cannot read image (not an image OpenCV decodes)",
+        "cannot read image (Is a directory)", None]
+    assert lines[3]["balls"] == []
+    # (the reason is in the line: no warning of OpenCV's own beside it)
+    assert result.stderr == ""
 
 
 def test_router_on_port_zero_prints_the_port_it_listens_on(log_dir):

@@ -10,7 +10,7 @@ import pytest
 
 from balltrack.common.clock import SimClock
 from balltrack.common.config import ConfigError, load_config, parse_overrides, replace_config
-from balltrack.common.images import bgr_to_message, image_to_bgr, jpeg_size
+from balltrack.common.images import UnreadableImage, bgr_to_message, image_to_bgr, jpeg_size, read_image
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, header
 
@@ -94,6 +94,21 @@ def test_corrupt_and_lying_jpegs_are_rejected_before_decoding():
                                "encoding": "jpeg", "data": data[:40]}, use_bin_type=True)
     with pytest.raises(MessageError, match="corrupt JPEG"):
         image_to_bgr(decode("Image", truncated))
+
+
+def test_read_image_gives_the_file_as_imread_does_or_says_why_not(tmp_path):
+    image = np.random.default_rng(3).integers(0, 256, (30, 40, 3), np.uint8)
+    cv2.imwrite(str(tmp_path / "frame.png"), image)
+    assert np.array_equal(read_image(tmp_path / "frame.png"), image)
+    assert np.array_equal(read_image(str(tmp_path / "frame.png")), cv2.imread(str(tmp_path / "frame.png")))
+    (tmp_path / "empty.png").write_bytes(b"")
+    (tmp_path / "text.png").write_text("not an image")
+    for path, reason in ((tmp_path / "missing.png", "No such file or directory"), (tmp_path, "Is a directory"),
+                         (tmp_path / "empty.png", "not an image OpenCV decodes"),
+                         (tmp_path / "text.png", "not an image OpenCV decodes")):
+        with pytest.raises(UnreadableImage) as refused:
+            read_image(path)
+        assert str(refused.value) == reason
 
 
 def test_keys_namespace():
