@@ -11,6 +11,7 @@ Example::
 
 import argparse
 import math
+import os
 from typing import Callable
 
 
@@ -51,3 +52,19 @@ def integer(minimum: int | None = None, maximum: int | None = None) -> Callable[
             raise argparse.ArgumentTypeError(f"must be at most {maximum}, got {text}")
         return value
     return parse
+
+
+def unwritable_reason(path: str | os.PathLike) -> str | None:
+    """Why a file cannot be written at ``path`` (it is a folder, its folder does not exist or
+    may not be written in), found without creating anything; None when it looks writable.
+    For a command to refuse its output option before it does any work or waits for a router;
+    opening the file may still fail (a full disk), and the command says so then."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        return "Is a directory"
+    folder = os.path.dirname(path) or "."
+    if not os.path.isdir(folder):
+        return f"{folder} is no folder"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return "Permission denied"
+    return None

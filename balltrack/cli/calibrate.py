@@ -12,7 +12,7 @@ import glob
 import os
 import sys
 
-from balltrack.common.arguments import number
+from balltrack.common.arguments import number, unwritable_reason
 
 
 def command_calibrate(args) -> int:
@@ -28,6 +28,9 @@ def command_calibrate(args) -> int:
         board = parse_board(args.board)
     except ValueError as error:
         return fail(str(error))
+    unwritable = unwritable_reason(args.output)
+    if unwritable:  # (before the images are read and the board searched for in each)
+        return fail(f"{args.output}: cannot write ({unwritable})")
     paths = []
     for pattern in args.images:  # patterns too, for shells that do not expand them
         matches = sorted(glob.glob(pattern)) if any(character in pattern for character in "*?[") else [pattern]

@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
-from balltrack.common.arguments import number
+from balltrack.common.arguments import number, unwritable_reason
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
@@ -62,6 +62,9 @@ def command_record(args) -> int:
     conflict = peer_conflict(args)
     if conflict:
         return _fail(args, conflict, 2)
+    unwritable = unwritable_reason(args.output)
+    if unwritable:  # (before waiting for a router, which may take long or never answer)
+        return _fail(args, f"cannot write {args.output}: {unwritable}", 2)
     if args.nice:
         os.nice(args.nice)  # before the session: threads take the priority of their creator
     keep_freed_memory()  # (frames come and go at 30 a second)

@@ -112,11 +112,16 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["topic", "list", "--window", "-1"], "--window: must be greater than 0"),
     (["record", "-o", "x.mcap", "--duration", "nan"], "--duration: must be a finite number"),
     (["record", "-o", "x.mcap", "--progress", "-1"], "--progress: must be at least 0"),
+    # (an output that cannot be written: said before any router is sought, not after)
+    (["record", "-o", "no-such-folder/x.mcap"], "cannot write no-such-folder/x.mcap: no-such-folder is no folder"),
+    (["record", "-o", "."], "cannot write .: Is a directory"),
     (["play", "x.mcap", "--rate", "-1"], "--rate: must be at least 0"),
     (["play", "x.mcap", "--start", "inf"], "--start: must be a finite number"),
     (["pub", "detected_ball", "{}", "--rate", "inf"], "--rate: must be a finite number"),
     (["secure", "init", "profile", "--hosts", "a", "--days", "0"], "--days: must be at least 1"),
     (["calibrate", "x.png", "--square", "0"], "--square: must be greater than 0"),
+    (["calibrate", "x.png", "--square", "0.02", "-o", "no-such-folder/camera.yaml"],
+     "no-such-folder/camera.yaml: cannot write (no-such-folder is no folder)"),
     # (what Zenoh refuses: one line naming the option, before any router is sought)
     (["echo", "detected_ball", "--connect", "tcp-127.0.0.1"], "--connect tcp-127.0.0.1: Endpoints must be of the form"),
     (["record", "-o", "x.mcap", "--zenoh-config", "missing.json5"], "missing.json5: No such file or directory"),

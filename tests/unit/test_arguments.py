@@ -5,7 +5,7 @@ import argparse
 
 import pytest
 
-from balltrack.common.arguments import ArgumentParser, integer, number
+from balltrack.common.arguments import ArgumentParser, integer, number, unwritable_reason
 
 
 @pytest.mark.parametrize("text, reason", [("nan", "finite"), ("inf", "finite"), ("-1", "at least 0"),
@@ -37,3 +37,12 @@ def test_a_parser_gives_one_line_and_status_2(capsys):
     assert exit_info.value.code == 2
     # the reason alone, no usage block
     assert capsys.readouterr().err.strip().splitlines() == ["tool: argument --frames: must be at least 1, got 0"]
+
+
+def test_an_unwritable_output_is_named_before_anything_is_made(tmp_path):
+    assert unwritable_reason(tmp_path / "run.mcap") is None
+    assert unwritable_reason(tmp_path) == "Is a directory"
+    assert unwritable_reason(tmp_path / "missing" / "run.mcap") == f"{tmp_path / 'missing'} is no folder"
+    (tmp_path / "file").write_text("")
+    assert unwritable_reason(tmp_path / "file" / "run.mcap") == f"{tmp_path / 'file'} is no folder"
+    assert list(tmp_path.iterdir()) == [tmp_path / "file"]  # (nothing made)
