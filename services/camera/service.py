@@ -8,8 +8,8 @@ answered as a query, as the simulator does. Stats add ``frames``, ``disconnects`
 ``reconnects`` (a live source that stopped delivering and was reopened), ``skipped_frames``
 (live frames left out to keep to ``rate_hz``), ``rewinds`` and ``unreadable_files``.
 
-A source that cannot be opened, or a calibration file that cannot be read or does not fit the
-frames, is one line on stderr and exit status 2. The end of a video or of the photos exits 0
+A source that cannot be opened (photos none of which OpenCV reads too), or a calibration file
+that cannot be read or does not fit the frames, is one line on stderr and exit status 2. The end of a video or of the photos exits 0
 (``loop`` starts them again); a device or stream that disappears is reopened with backoff.
 
 Example:
@@ -100,7 +100,11 @@ def build(service: ServiceContext):
         finally:
             reader.close()
         if feed.ended:
-            context.log.info("end of %s %s after %d frames", spec.kind, spec.target, feed.frames)
+            if not feed.frames and reader.unreadable:  # (not the end of the photos: none was one)
+                raise ConfigError(f"source: no file of {spec.target} is an image OpenCV reads "
+                                  f"({reader.unreadable} tried; {reader.last_unreadable})")
+            context.log.info("end of %s %s after %d frames%s", spec.kind, spec.target, feed.frames,
+                             f" ({reader.unreadable} files unreadable, left out)" if reader.unreadable else "")
             context.stop.set()
 
     return loop

@@ -92,6 +92,8 @@ class ImageFiles:
         self.paths = paths
         self.position = 0
         self.unreadable = 0
+        # "PATH: REASON" of the last file that could not be read (None: none so far)
+        self.last_unreadable: str | None = None
 
     def read(self) -> np.ndarray | None:
         while self.position < len(self.paths):
@@ -99,8 +101,9 @@ class ImageFiles:
             self.position += 1
             try:
                 return read_image(path)
-            except UnreadableImage:
+            except UnreadableImage as error:
                 self.unreadable += 1
+                self.last_unreadable = f"{path}: {error}"
         return None
 
     def rewind(self) -> bool:

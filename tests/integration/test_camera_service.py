@@ -103,6 +103,9 @@ def test_video_loops(session, launch, tmp_path):
     (("source=97",), "camera: source: cannot open device 97"),
     (("source=BAD_VIDEO",), "camera: source: cannot open video "),
     (("source=PHOTOS", "calibration=/nonexistent.yaml"), "camera: /nonexistent.yaml: cannot read"),
+    # (photos none of which is an image: not "the end of the photos after 0 frames", status 0)
+    (("source=NOT_IMAGES",), "camera: source: no file of NOT_IMAGES is an image OpenCV reads (2 tried; "),
+    (("source=NOT_IMAGES", "loop=true"), "camera: source: no file of NOT_IMAGES is an image OpenCV reads"),
     (("source=PHOTOS", "calibration=WRONG_SIZE"), "camera: calibration: calibration is for 640x360"),
 ])
 def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_path, photos, overrides, expected):
@@ -110,11 +113,17 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
     bad_video.write_bytes(b"\x00" * 4096)
     wrong_size = tmp_path / "wide.yaml"
     write_calibration(wrong_size, CameraModel(640, 360, 500.0, 500.0, 320.0, 180.0))
-    replacements = {"BAD_VIDEO": str(bad_video), "PHOTOS": str(photos), "WRONG_SIZE": str(wrong_size)}
+    not_images = tmp_path / "not_images"
+    not_images.mkdir()
+    for name in ("a.jpg", "b.png"):
+        (not_images / name).write_text("not an image")
+    replacements = {"BAD_VIDEO": str(bad_video), "PHOTOS": str(photos), "WRONG_SIZE": str(wrong_size),
+                    "NOT_IMAGES": str(not_images)}
     arguments = []
     for override in overrides:
         for placeholder, value in replacements.items():
             override = override.replace(placeholder, value)
+            expected = expected.replace(placeholder, value)
         arguments += ["--set", override]
     process = start_service("camera", router.endpoint, tmp_path, *arguments)
     assert process.popen.wait(60) == 2, process.output()
