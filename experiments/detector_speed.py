@@ -19,6 +19,10 @@ The renders are timed once more with the machine idle for a frame period (33 ms)
 call, as a service is between a camera's frames (``PACED_PAUSE``): what a call costs there, with
 the caches gone cold, which the demo's latency is made of. No goal reads it.
 
+The photos are timed once more with the balltrack detector shrinking them first to the widths
+of ``SHRUNK_WIDTHS`` (its ``work_width``), beside the plain pipeline at full size in the same
+calls: what processing fewer pixels would buy (no goal reads it).
+
 It then splits the balltrack detector's time by stage (``BallDetector.stage_times``): colour
 mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
 the ones its p50 reads; and the plain pipeline's, into its colour mask and its Hough transform
@@ -29,6 +33,7 @@ Example::
     balltrack experiment detector_speed --photos /work/shared/data
 """
 
+import dataclasses
 import math
 import statistics
 import sys
@@ -53,6 +58,13 @@ FRAME_SIZE = (640, 480)
 # costs more (the balltrack detector's p50 on the renders: 2.26 and 2.55 ms back to back, 2.85
 # and 3.30 ms so, in two runs on this project's 2-core machines). The demo's calls are so.
 PACED_PAUSE = 1.0 / 30.0
+
+
+# The photos are timed once more with the balltrack detector shrinking them to these widths
+# first (``work_width``), beside the plain pipeline at 640 in the same calls: what processing
+# fewer pixels buys (no goal reads it; the photo scores at a width: ``python -m
+# balltrack.experiments.real_photos DATA --set work_width=W``).
+SHRUNK_WIDTHS = (480, 320)
 
 
 # The plain pipeline's stages, as ``PlainDetector.stage_times`` adds them up: the colour mask
@@ -309,6 +321,15 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                 for stage, times in split[name].items():
                     result.figure(f"{name}/{kind}/{stage}/all_ms", times["all"])
                     result.figure(f"{name}/{kind}/{stage}/middle_ms", times["middle"])
+        shrunk_rows = []
+        if "photos" in sets:
+            shrunk = {"plain": detectors["plain"],
+                      **{width: BallDetector(dataclasses.replace(config, work_width=width)) for width in SHRUNK_WIDTHS}}
+            measured = measure(shrunk, sets["photos"], repeats)
+            shrunk_rows = [recorded(result, f"photos_at_{width}", len(sets["photos"]),
+                                    {"plain": measured["plain"], "balltrack": measured[width]},
+                                    f"photos, the balltrack detector at work_width {width}")[0]
+                           for width in SHRUNK_WIDTHS]
         result.table(SPEED_HEADERS, rows + paced_rows,
                      f"Calls alternating on the same frames, in whole passes over each set "
                      f"({', '.join(f'{calls_for(repeats, len(frames))} on the {name}' for name, frames in sets.items())}, "
@@ -317,6 +338,12 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      f"calls back to back. The last row: the renders again, the machine idle "
                      f"{1000 * PACED_PAUSE:.0f} ms before each call, as between a camera's frames "
                      f"(what a service's call costs; no goal):")
+        if shrunk_rows:
+            result.table(SPEED_HEADERS, shrunk_rows,
+                         "The photos again, the balltrack detector shrinking each to a smaller width "
+                         "first (work_width; the plain pipeline at 640 x 480 in the same calls): what "
+                         "processing fewer pixels buys, at a cost in recall that real_photos "
+                         "--set work_width=W measures (no goal):")
         if set_rows:
             result.table(SPEED_HEADERS, set_rows,
                          "The same calls on the photos, set by set (the goal reads all the photos "

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from balltrack.experiments import cli
+from balltrack.experiments import cli, detector_speed
 from balltrack.services.detector.detector import STAGES
 
 
@@ -95,6 +95,11 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
         ours = figures[f"detector_speed/{name}/balltrack/wall_p50_ms"]
         assert plain > 0 and ours > 0
         assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(plain / ours, rel=1e-5)
+    # The photos again, the balltrack detector on shrunk frames: figures only, no goal.
+    for width in (detector_speed.SHRUNK_WIDTHS if "photos" in sets else ()):
+        shrunk = figures[f"detector_speed/photos_at_{width}/balltrack/wall_p50_ms"]
+        assert figures[f"detector_speed/photos_at_{width}/ratio"] == pytest.approx(
+            figures[f"detector_speed/photos_at_{width}/plain/wall_p50_ms"] / shrunk, rel=1e-5)
     # The renders once more, paced as a camera's frames arrive: figures only, no goal.
     paced_plain = figures["detector_speed/renders_paced/plain/wall_p50_ms"]
     paced_ours = figures["detector_speed/renders_paced/balltrack/wall_p50_ms"]
