@@ -347,8 +347,12 @@ def read_config_file(path: str | Path, section: str | None = None) -> dict[str, 
             data = tomllib.load(handle)
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such config file") from None
+    except OSError as error:  # (a folder, no permission)
+        raise ConfigError(f"{path}: cannot read the config file ({error.strerror or error})") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path}: not valid TOML ({error})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not valid TOML (not UTF-8 text)") from None
     if section and isinstance(data.get(section), dict):
         return dict(data[section])
     return {key: value for key, value in data.items() if not isinstance(value, dict)}

@@ -56,6 +56,8 @@ def _read_file(path: str, service: str) -> dict:
         raise ConfigError(f"{path}: {error.strerror}") from None
     except yaml.YAMLError as error:
         raise ConfigError(f"{path}: not YAML ({shorten(str(error).splitlines()[0], 100)})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not YAML (not UTF-8 text)") from None
     if isinstance(data, dict) and isinstance(data.get(service), dict):
         data = data[service]
     if not isinstance(data, dict) or not data:

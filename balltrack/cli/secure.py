@@ -47,6 +47,8 @@ def register(commands) -> None:
     init.add_argument("--no-localhost", action="store_true",
                       help="router certificates name only the hosts, not localhost/127.0.0.1 "
                            "(then every client dials a host name)")
-    init.add_argument("--days", type=integer(minimum=1), default=825, help="certificate lifetime (default 825)")
+    # (a lifetime past the year 9999 cannot be written in a certificate: 100 years is plenty)
+    init.add_argument("--days", type=integer(minimum=1, maximum=36500), default=825,
+                      help="certificate lifetime (default 825, at most 36500)")
     init.add_argument("--force", action="store_true", help="replace an existing profile (new keys, passwords)")
     init.set_defaults(handler=command_init, roles=list(ROLES))

@@ -119,6 +119,7 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["play", "x.mcap", "--start", "inf"], "--start: must be a finite number"),
     (["pub", "detected_ball", "{}", "--rate", "inf"], "--rate: must be a finite number"),
     (["secure", "init", "profile", "--hosts", "a", "--days", "0"], "--days: must be at least 1"),
+    (["secure", "init", "profile", "--hosts", "a", "--days", "99999999"], "--days: must be at most 36500"),
     (["calibrate", "x.png", "--square", "0"], "--square: must be greater than 0"),
     (["calibrate", "x.png", "--square", "0.02", "-o", "no-such-folder/camera.yaml"],
      "no-such-folder/camera.yaml: cannot write (no-such-folder is no folder)"),
@@ -142,6 +143,7 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["run", "detector+locator", "--set", "locator.bogus=1"], "bogus: unknown parameter"),
     (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
     (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
+    (["run", "detector", "--config", "."], "detector: .: cannot read the config file (Is a directory)"),
     (["deploy", "start", "--services", "detector+locator,locator"], "a service may run once"),
     (["deploy", "start", "--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])

@@ -122,3 +122,7 @@ def test_config_dump_then_load_restores_parameters(router, locator, tmp_path):
     assert refused.returncode == 2 and "ball_radius" in refused.stderr
     missing = balltrack("config", "load", "locator", str(tmp_path / "none.yaml"))
     assert missing.returncode == 2 and "none.yaml" in missing.stderr
+    (tmp_path / "binary.yaml").write_bytes(b"\xff\xfe\x00")
+    binary = balltrack("config", "load", "locator", str(tmp_path / "binary.yaml"))
+    assert binary.returncode == 2
+    assert binary.stderr == f"balltrack config: {tmp_path / 'binary.yaml'}: not YAML (not UTF-8 text)\n"

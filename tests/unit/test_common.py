@@ -163,6 +163,13 @@ def test_config_file_errors(tmp_path):
     bad.write_text("gain = = 1")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(ExampleConfig, bad)
+    # (a folder, or bytes that are not text: a one-line ConfigError, not an OSError or
+    # UnicodeDecodeError from the reading)
+    with pytest.raises(ConfigError, match=r"cannot read the config file \(Is a directory\)"):
+        load_config(ExampleConfig, tmp_path)
+    (tmp_path / "binary.toml").write_bytes(b"gain = \xff\xfe")
+    with pytest.raises(ConfigError, match=r"not valid TOML \(not UTF-8 text\)"):
+        load_config(ExampleConfig, tmp_path / "binary.toml")
 
 
 def test_replace_config_validates_and_keeps_original():
