@@ -189,6 +189,17 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
 
     contexts = [ServiceContext(name, session, args.namespace, config, stop) for name, config, _ in services]
     status = 0
+    # What a loop in a thread of its own refused (a source none of whose photos is an image):
+    # it stops the process and is reported as the main thread's loop's would be.
+    refused: list[Exception] = []
+
+    def run_loop(context: ServiceContext, loop: Callable) -> None:
+        try:
+            loop(context)
+        except (ConfigError, ValueError) as error:
+            refused.append(error)
+            stop.set()
+
     try:
         loops = []
         tokens = []
@@ -198,7 +209,7 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
                 loops.append((context, loop))
             tokens.append(_announce(context))
         for context, loop in loops[:-1]:
-            context.start_thread(lambda context=context, loop=loop: loop(context), f"{context.name}-loop")
+            context.start_thread(lambda context=context, loop=loop: run_loop(context, loop), f"{context.name}-loop")
         if loops:
             loops[-1][1](loops[-1][0])
         # A timed wait keeps the main thread responsive to signals on every platform.
@@ -206,6 +217,8 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
             pass
         for token in tokens:
             token.undeclare()
+        if refused:
+            raise refused[0]
     except (ConfigError, ValueError) as error:
         print(f"{label}: {error}", file=sys.stderr)
         status = 2

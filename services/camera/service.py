@@ -9,8 +9,9 @@ answered as a query, as the simulator does. Stats add ``frames``, ``disconnects`
 (live frames left out to keep to ``rate_hz``), ``rewinds`` and ``unreadable_files``.
 
 A source that cannot be opened (photos none of which OpenCV reads too), or a calibration file
-that cannot be read or does not fit the frames, is one line on stderr and exit status 2. The end of a video or of the photos exits 0
-(``loop`` starts them again); a device or stream that disappears is reopened with backoff.
+that cannot be read or does not fit the frames, is one line on stderr and exit status 2. The end
+of a video or of the photos exits 0 (``loop`` starts them again); a device or stream that
+disappears is reopened with backoff.
 
 Example:
     balltrack run camera --set source=/dev/video0 --set width=640 --set height=480 \\

@@ -132,6 +132,22 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
     assert "Traceback" not in process.output()
 
 
+@pytest.mark.parametrize("name", ["camera+ros2_bridge", "ros2_bridge+camera"])
+def test_a_refused_source_stops_a_process_of_several_services_whichever_loop_it_is(router, tmp_path, name):
+    # (the first service's loop runs in a thread of its own: what it refused was a traceback
+    # there, and the process went on without its camera)
+    pytest.importorskip("rosbags")
+    not_images = tmp_path / "not_images"
+    not_images.mkdir()
+    (not_images / "a.jpg").write_text("not an image")
+    process = start_service(name, router.endpoint, tmp_path, "--set", f"camera.source={not_images}")
+    assert process.popen.wait(60) == 2, process.output()
+    errors = [line for line in process.output().splitlines() if line.startswith(f"{name}: ")]
+    assert errors == [f"{name}: source: no file of {not_images} is an image OpenCV reads (1 tried; "
+                      f"{not_images / 'a.jpg'}: not an image OpenCV decodes)"], process.output()
+    assert "Traceback" not in process.output()
+
+
 @pytest.mark.parametrize("name, overrides, expected", [
     ("camera", ("source=/nonexistent/clip.mp4",), "camera: source: no such file, folder, device or URL"),
     ("camera", ("calibration=/nonexistent.yaml",), "camera: /nonexistent.yaml: cannot read"),
