@@ -247,6 +247,6 @@ def open_from_args(args, open_timeout: float | None = None):
     if getattr(args, "secure", None):
         try:
             zenoh_config = str(secure_client_path(args.secure, args.role))
-        except ValueError as error:
-            raise SessionOpenError(str(error)) from None
+        except ValueError as error:  # (a bad --secure, as a bad --zenoh-config: not worth waiting for)
+            raise ZenohConfigError(str(error)) from None
     return open_session(args.connect, zenoh_config, open_timeout, getattr(args, "peer", False))

@@ -27,7 +27,7 @@ from balltrack.cli import (calibrate, config, introspect, network, offline, publ
 from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.common.keys import Keys
-from balltrack.common.session import client_config
+from balltrack.common.session import client_config, secure_client_path
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import interruptible, silence_closed_stdout
 
@@ -82,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
                 # Zenoh refuses a bad --connect endpoint or --zenoh-config file when the
                 # config is built: a bad argument, said before the command starts its work.
                 client_config(getattr(args, "connect", None), getattr(args, "zenoh_config", None))
+            if getattr(args, "secure", None) and hasattr(args, "role"):
+                secure_client_path(args.secure, args.role)  # (the profile holds this command's role)
         except ValueError as error:
             print(f"balltrack {args.command}: {error}", file=sys.stderr)
             return 2
