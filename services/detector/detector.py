@@ -132,8 +132,14 @@ class BallDetector:
         self._explained_boxes: list[Box] = []
 
     # ----------------------------------------------------------------------------- public
-    def detect(self, image_bgr: np.ndarray) -> DetectionResult:
-        """Detect balls in one frame; ``image_bgr`` is uint8 HxWx3 (HxW grey is accepted)."""
+    def detect(self, image_bgr: np.ndarray, regions: list[Box] | None = None) -> DetectionResult:
+        """Detect balls in one frame; ``image_bgr`` is uint8 HxWx3 (HxW grey is accepted).
+
+        ``regions``: boxes (left, top, right, bottom; px of the frame as processed, see
+        ``work_size``) to compute the colour mask in, in place of those its coarse search finds
+        (``regions.py``); for analysis: ``experiments/detector_speed.py`` times the detector
+        with the boxes of each frame's own mask blobs, the most a coarse search could save.
+        Frames the regions do not apply to (small, odd-sized, pitch dark) ignore them."""
         started = time.perf_counter()
         image = check_image(image_bgr)
         height, width = image.shape[:2]
@@ -144,7 +150,7 @@ class BallDetector:
             scale, scale_y = work_size[0] / width, work_size[1] / height  # (the work height is rounded)
             work = cv2.resize(image, work_size, interpolation=cv2.INTER_AREA)
 
-        planes = self._masker.planes(work)
+        planes = self._masker.planes(work, regions)
         self._lap("colour mask", started)
         candidates = self._find_candidates(planes, scale)
         detections = [Detection(*in_input_frame(c, scale, scale_y), score=round(c.score, 4))

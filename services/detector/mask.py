@@ -29,7 +29,7 @@ import numpy as np
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.geometry import brightest_channel, gaussian_blur
 from balltrack.services.detector.jit import compiled
-from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, PartEqualiser,
+from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, Box, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
                                                  doubled_part, grown_box, half_value, regions_apply,
                                                  source_span)
@@ -184,8 +184,10 @@ class ColourMasker:
         self._part_clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit)
                             if config.clahe_clip_limit > 0 else None)
 
-    def planes(self, image_bgr: np.ndarray) -> ColourPlanes:
-        """The cleaned colour mask of a checked BGR frame, with the planes the checks read."""
+    def planes(self, image_bgr: np.ndarray, boxes: list[Box] | None = None) -> ColourPlanes:
+        """The cleaned colour mask of a checked BGR frame, with the planes the checks read.
+        ``boxes``: the regions of interest to compute the mask in, in place of those the coarse
+        search finds (see ``BallDetector.detect``)."""
         config = self.config
         small = quarter_sample(image_bgr)
         # (the sample's HSV serves the reference level, its V, and the regions' coarse search)
@@ -206,7 +208,7 @@ class ColourMasker:
             # search reads the same sample of the gained frame)
             if gain > 1.0:
                 small_hsv = cv2.cvtColor(brighten(small, gain, small), cv2.COLOR_BGR2HSV)
-            found = self._mask_in_regions(gained, gain, small_hsv)
+            found = self._mask_in_regions(gained, gain, small_hsv, boxes)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
                                     reference=min(255.0, reference * gain), dark=dark, extent=found[2])
@@ -242,16 +244,17 @@ class ColourMasker:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
         return mask, chroma
 
-    def _mask_in_regions(self, gained: np.ndarray, gain: float, sample_hsv: np.ndarray | None = None
+    def _mask_in_regions(self, gained: np.ndarray, gain: float, sample_hsv: np.ndarray | None = None,
+                         boxes: list[Box] | None = None
                          ) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
         """Steps 2-4 only in boxes around what may be ball-coloured (see ``regions.py``), each
         grown until no mask blob crosses its edge: the mask and chroma, zero elsewhere, and the
         bounding box of the boxes; None (do the whole frame) when the boxes would cover too
         much of it. ``sample_hsv``: the HSV of the gained frame's ``quarter_sample`` when
-        already made."""
+        already made; ``boxes``: the boxes to start from instead of the coarse search's."""
         config = self.config
         height, width = gained.shape[:2]
-        pending = coarse_boxes(gained, self._coarse_hue, config, sample_hsv)
+        pending = boxes if boxes is not None else coarse_boxes(gained, self._coarse_hue, config, sample_hsv)
         if pending is None:
             return None
         mask = np.zeros((height, width), np.uint8)

@@ -84,6 +84,20 @@ def test_bad_arguments_exit_2_with_one_line(arguments, tmp_path, capsys):
     assert error.startswith("balltrack experiment:") and "\n" not in error
 
 
+def test_own_blob_boxes_hold_each_blob_with_the_coarse_searchs_margin():
+    from balltrack.services.detector.regions import REGION_MARGIN
+    mask = np.zeros((480, 640), np.uint8)
+    cv2.circle(mask, (100, 100), 10, 255, -1)
+    cv2.circle(mask, (500, 400), 20, 255, -1)
+    boxes = sorted(detector_speed.own_blob_boxes(mask))
+    assert boxes == [(90 - REGION_MARGIN, 90 - REGION_MARGIN, 111 + REGION_MARGIN, 111 + REGION_MARGIN),
+                     (480 - REGION_MARGIN, 380 - REGION_MARGIN, 521 + REGION_MARGIN, 421 + REGION_MARGIN)]
+    # two blobs close together cost less as one box, as the coarse search merges them
+    cv2.circle(mask, (130, 100), 10, 255, -1)
+    assert len(detector_speed.own_blob_boxes(mask)) == 2
+    assert detector_speed.own_blob_boxes(np.zeros((480, 640), np.uint8)) == []
+
+
 def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     status = cli.main(["detector_speed", "--frames", "3", "--quick", "--out", str(tmp_path), "--no-progress"])
     assert status == 0
@@ -96,10 +110,12 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
         assert plain > 0 and ours > 0
         assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(plain / ours, rel=1e-5)
     # The photos again, the balltrack detector on shrunk frames: figures only, no goal.
-    for width in (detector_speed.SHRUNK_WIDTHS if "photos" in sets else ()):
-        shrunk = figures[f"detector_speed/photos_at_{width}/balltrack/wall_p50_ms"]
-        assert figures[f"detector_speed/photos_at_{width}/ratio"] == pytest.approx(
-            figures[f"detector_speed/photos_at_{width}/plain/wall_p50_ms"] / shrunk, rel=1e-5)
+    # And with its colour mask only in boxes around its own blobs (the bound of a better coarse search).
+    for name in ([f"photos_at_{width}" for width in detector_speed.SHRUNK_WIDTHS] + ["photos_own_blob_regions"]
+                 if "photos" in sets else ()):
+        shrunk = figures[f"detector_speed/{name}/balltrack/wall_p50_ms"]
+        assert figures[f"detector_speed/{name}/ratio"] == pytest.approx(
+            figures[f"detector_speed/{name}/plain/wall_p50_ms"] / shrunk, rel=1e-5)
     # The renders once more, paced as a camera's frames arrive: figures only, no goal.
     paced_plain = figures["detector_speed/renders_paced/plain/wall_p50_ms"]
     paced_ours = figures["detector_speed/renders_paced/balltrack/wall_p50_ms"]

@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.detector import BallDetector
 from balltrack.services.detector.mask import ColourMasker
 from balltrack.services.detector.regions import (HALF_VALUE_SIGMA, PartEqualiser, coarse_boxes,
                                                  coarse_hue_table, doubled_part, half_value, regions_apply,
@@ -84,3 +85,15 @@ def test_mask_by_regions_is_the_whole_frames():
     whole, _ = masker._colour_mask(image, 1.0, 5, DetectorConfig().min_chroma, opening=True)
     assert np.count_nonzero(whole) > 0
     assert np.count_nonzero(planes.mask != whole) <= 0.002 * np.count_nonzero(whole)
+
+
+def test_detect_in_given_regions_computes_the_mask_only_there():
+    detector = BallDetector(DetectorConfig())
+    image = scene([(200.0, 150.0, 20.0), (500.0, 380.0, 35.0)])
+    everywhere = detector.detect(image)
+    assert sorted((round(d.u), round(d.v)) for d in everywhere.detections) == [(200, 150), (500, 380)]
+    # a box around the first ball only: the second is not in the mask, so not found
+    around_first = detector.detect(image, regions=[(160, 110, 240, 190)])
+    assert [(round(d.u), round(d.v)) for d in around_first.detections] == [(200, 150)]
+    assert np.count_nonzero(around_first.mask[300:, 400:]) == 0
+    assert np.count_nonzero(around_first.mask[110:190, 160:240]) > 0
