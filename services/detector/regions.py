@@ -3,9 +3,10 @@
 Most of a frame is not ball-coloured, and blurring, converting and cleaning all of it costs
 more than the rest of the detector. So the colour is first looked for on every COARSE_STEP-th
 pixel with loose thresholds, and steps 2-4 run at full resolution only in boxes around what
-passed: inside a box the mask is the whole frame's, outside it is
-empty. The one plane that needs the whole frame is the CLAHE-equalised value (its tiles'
-histograms); it is made only on the CLAHE tiles around the boxes.
+passed: inside a box the mask is the whole frame's (but for CLAHE's rounding, see
+PartEqualiser), outside it is empty. The one plane that needs the whole frame is the
+CLAHE-equalised value (its tiles' histograms); it is made only on the CLAHE tiles around the
+boxes.
 """
 
 import math
@@ -181,9 +182,12 @@ class PartEqualiser:
     """CLAHE of a frame's half-size value plane, computed only on the tiles a part of it needs.
 
     A pixel's CLAHE value depends on the histograms of the (up to four) tiles whose centres
-    surround it, so equalising those tiles gives a part the whole plane's values. Planes that the tile grid does not divide exactly (OpenCV
-    pads them) are equalised whole, and so is the rest of the frame's parts once they have
-    needed PART_TILES_SHARE of its tiles in all (parts' tiles overlap).
+    surround it, so equalising those tiles gives a part the whole plane's values, to within one
+    level: OpenCV interpolates between tiles in float32, and at a part's offsets a weight may
+    round the other way (a pixel at v_min's edge may then change sides). Planes that the tile
+    grid does not divide exactly (OpenCV pads them) are equalised whole, and so is the rest of
+    the frame's parts once they have needed PART_TILES_SHARE of its tiles in all (parts' tiles
+    overlap).
     """
 
     def __init__(self, clahe: cv2.CLAHE, grid: int, frame: np.ndarray):
