@@ -50,7 +50,7 @@ from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import exit_with
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
-from balltrack.services.detector.regions import REGION_MARGIN, Box, merged_boxes
+from balltrack.services.detector.regions import Box, blob_boxes
 
 DEFAULT_PHOTOS = Path("/work/shared/data")
 GOAL_RATIO = 2.0
@@ -104,12 +104,10 @@ class OwnBlobRegions:
 
 def own_blob_boxes(mask: np.ndarray) -> list[Box]:
     """The boxes the coarse search would give if it found exactly ``mask``'s blobs: their
-    bounding boxes REGION_MARGIN wider, merged as the search merges its own."""
+    bounding boxes with its margin, merged as it merges its own (``regions.blob_boxes``)."""
     height, width = mask.shape
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    return merged_boxes([(max(0, left - REGION_MARGIN), max(0, top - REGION_MARGIN),
-                          min(width, left + box_width + REGION_MARGIN), min(height, top + box_height + REGION_MARGIN))
-                         for left, top, box_width, box_height in map(cv2.boundingRect, contours)])
+    return blob_boxes(map(cv2.boundingRect, contours), 1, width, height)
 
 
 class PlainDetector:

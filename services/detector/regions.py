@@ -99,14 +99,20 @@ def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfi
     covered = sum(box_width * box_height for _, _, box_width, box_height in rectangles)
     if covered * COARSE_STEP * COARSE_STEP > MAX_REGION_SHARE * width * height:
         return None  # much of the frame may be ball-coloured (grass, a yellow floor)
-    boxes = [(max(0, left * COARSE_STEP - REGION_MARGIN), max(0, top * COARSE_STEP - REGION_MARGIN),
-              min(width, (left + box_width) * COARSE_STEP + REGION_MARGIN),
-              min(height, (top + box_height) * COARSE_STEP + REGION_MARGIN))
-             for left, top, box_width, box_height in rectangles]
-    boxes = merged_boxes(boxes)
+    boxes = blob_boxes(rectangles, COARSE_STEP, width, height)
     if sum(box_area(box) for box in boxes) > MAX_REGION_SHARE * width * height:
         return None
     return boxes
+
+
+def blob_boxes(rectangles, step: int, width: int, height: int) -> list[Box]:
+    """The boxes around blobs whose bounding rectangles (x, y, w, h, as ``cv2.boundingRect``
+    gives them) are in pixels of a plane ``step`` times smaller than the ``width`` x ``height``
+    frame: each REGION_MARGIN px wider all round, inside the frame, then merged (``merged_boxes``)."""
+    return merged_boxes([(max(0, left * step - REGION_MARGIN), max(0, top * step - REGION_MARGIN),
+                          min(width, (left + box_width) * step + REGION_MARGIN),
+                          min(height, (top + box_height) * step + REGION_MARGIN))
+                         for left, top, box_width, box_height in rectangles])
 
 
 def box_area(box: Box) -> int:

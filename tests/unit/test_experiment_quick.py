@@ -15,6 +15,7 @@ import pytest
 
 from balltrack.experiments import cli, detector_speed
 from balltrack.services.detector.detector import STAGES
+from balltrack.services.detector.regions import REGION_MARGIN
 
 
 def test_illumination_writes_results_report_and_plots(tmp_path):
@@ -85,7 +86,6 @@ def test_bad_arguments_exit_2_with_one_line(arguments, tmp_path, capsys):
 
 
 def test_own_blob_boxes_hold_each_blob_with_the_coarse_searchs_margin():
-    from balltrack.services.detector.regions import REGION_MARGIN
     mask = np.zeros((480, 640), np.uint8)
     cv2.circle(mask, (100, 100), 10, 255, -1)
     cv2.circle(mask, (500, 400), 20, 255, -1)
