@@ -47,6 +47,7 @@ import cv2
 import numpy as np
 
 from balltrack.common.arguments import ArgumentParser
+from balltrack.common.images import UnreadableImage, read_image
 from balltrack.common.terminal import exit_with
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
@@ -164,8 +165,13 @@ def photo_paths(folder: Path) -> list[Path]:
 def named_photo_frames(folder: Path) -> list[tuple[Path, np.ndarray]]:
     """Each readable photo under ``folder`` (see photo_paths) with its path, as a 640x480
     frame (``camera_frame``)."""
-    images = [(path, cv2.imread(str(path))) for path in photo_paths(folder)]
-    return [(path, camera_frame(image)) for path, image in images if image is not None]
+    frames = []
+    for path in photo_paths(folder):
+        try:
+            frames.append((path, camera_frame(read_image(path))))
+        except UnreadableImage:
+            continue  # (a .jpg that is not one: not a photo to time)
+    return frames
 
 
 def camera_frame(image: np.ndarray, size: tuple[int, int] = FRAME_SIZE) -> np.ndarray:

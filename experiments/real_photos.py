@@ -34,11 +34,11 @@ import time
 from pathlib import Path
 from typing import Callable
 
-import cv2
 import numpy as np
 
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import ConfigError, load_config
+from balltrack.common.images import UnreadableImage, read_image
 from balltrack.common.terminal import exit_with
 from balltrack.experiments.detector_speed import PlainDetector
 from balltrack.experiments.photo_variants import VARIANTS, Variant
@@ -79,6 +79,15 @@ def photo_sets(folder) -> list[Path]:
     return sorted(child for child in folder.iterdir() if (child / "labels.json").is_file())
 
 
+def labelled_image(folder: Path, name: str) -> np.ndarray:
+    """The image ``name`` of a labelled set; FileNotFoundError when it is missing or not an
+    image (a set's labels name every file they score)."""
+    try:
+        return read_image(folder / name)
+    except UnreadableImage as error:
+        raise FileNotFoundError(f"{folder / name}: missing or not an image ({error})") from None
+
+
 def _box_contains(box: dict, u: float, v: float) -> bool:
     return box["x"] <= u <= box["x"] + box["w"] and box["y"] <= v <= box["y"] + box["h"]
 
@@ -117,9 +126,7 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
     files: dict[str, dict] = {}
     timings: list[float] = []
     for name in sorted(labels):
-        image = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
-        if image is None:
-            raise FileNotFoundError(f"{folder / name}: missing or not an image")
+        image = labelled_image(folder, name)
         boxes = labels[name]
         if variant is not None:
             image, boxes = variant(image, boxes)
@@ -256,9 +263,7 @@ def missed_balls(folder, config: DetectorConfig) -> list[dict]:
     detector = BallDetector(config)
     missed = []
     for name in sorted(labels):
-        image = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
-        if image is None:
-            raise FileNotFoundError(f"{folder / name}: missing or not an image")
+        image = labelled_image(folder, name)
         result, judged = detector.detect_judged(image)
         for centre_u, centre_v, radius in counted_balls(labels[name]):
             explanation = explain_place(image, result, judged, config, centre_u, centre_v, radius)
