@@ -26,7 +26,8 @@ class Encoding(enum.StrEnum):
 class CameraConfig:
     """One camera's settings; the defaults open the first video device at its own size and rate."""
 
-    # OpenCV opens all of them (cv2.VideoCapture; photos with cv2.imread, in name order).
+    # OpenCV opens all of them (cv2.VideoCapture; photos decoded by common.images.read_image, in
+    # name order).
     source: str = param("0", "a device index (`0`) or path (`/dev/video0`), a video file, a folder or "
                              "glob of images (`photos/*.jpg`), or a stream URL (`rtsp://...`, `http://...`)")
     rate_hz: float = param(0.0, "frames per second published; 0 = the source's own: a video's frame rate, "

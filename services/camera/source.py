@@ -1,11 +1,12 @@
 """Where frames come from, and when: the camera service's core (no Zenoh).
 
 :func:`open_source` turns the ``source`` setting into one of two readers, both through OpenCV:
-:class:`ImageFiles` (a folder or glob of photos, cv2.imread in name order) or :class:`Capture`
-(cv2.VideoCapture: a device, a video file or a stream URL). :class:`FrameFeed` reads one at the
-configured rate and applies the end-of-source rules: a file ends (or starts again with
-``loop``); a live source (device, stream) that stops delivering is reopened with backoff, and
-the failures and reconnections are counted for the service's stats.
+:class:`ImageFiles` (a folder or glob of photos, decoded in name order by
+``common.images.read_image``) or :class:`Capture` (cv2.VideoCapture: a device, a video file or
+a stream URL). :class:`FrameFeed` reads one at the configured rate and applies the
+end-of-source rules: a file ends (or starts again with ``loop``); a live source (device,
+stream) that stops delivering is reopened with backoff, and the failures and reconnections are
+counted for the service's stats.
 """
 
 import glob
