@@ -79,6 +79,19 @@ def photo_sets(folder) -> list[Path]:
     return sorted(child for child in folder.iterdir() if (child / "labels.json").is_file())
 
 
+class LabelsError(ValueError):
+    """A set's labels.json that is not JSON text; the text names the file."""
+
+
+def read_labels(folder: Path) -> dict:
+    """A labelled set's ``labels.json``: file name -> list of boxes."""
+    path = folder / "labels.json"
+    try:
+        return json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise LabelsError(f"{path}: not JSON ({error})") from None
+
+
 def labelled_image(folder: Path, name: str) -> np.ndarray:
     """The image ``name`` of a labelled set; FileNotFoundError when it is missing or not an
     image (a set's labels name every file they score)."""
@@ -121,7 +134,7 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
     score}]}``.
     """
     folder = Path(folder)
-    labels = json.loads((folder / "labels.json").read_text())
+    labels = read_labels(folder)
     detect = detect or balltrack_detect(config or DetectorConfig())
     files: dict[str, dict] = {}
     timings: list[float] = []
@@ -259,7 +272,7 @@ def missed_balls(folder, config: DetectorConfig) -> list[dict]:
     (``services/detector/explain.py``): ``{file, u, v, radius_px, summary, explanation}``, in
     file order."""
     folder = Path(folder)
-    labels = json.loads((folder / "labels.json").read_text())
+    labels = read_labels(folder)
     detector = BallDetector(config)
     missed = []
     for name in sorted(labels):
@@ -314,7 +327,11 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         folders.extend(sets)
-    scores = score_sets(folders, config, plain=not args.no_plain)
+    try:
+        scores = score_sets(folders, config, plain=not args.no_plain)
+    except (FileNotFoundError, LabelsError) as error:  # (a set whose labels name no image, or are not JSON)
+        print(f"real_photos: {error}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(scores, indent=1))
         return 0

@@ -53,6 +53,20 @@ def test_command_line_summary_and_bad_folder(tmp_path, capsys):
     assert real_photos.main([str(tmp_path / "missing")]) == 2
 
 
+def test_a_set_whose_labels_name_no_image_or_are_not_json_is_one_line_and_status_2(tmp_path, capsys):
+    write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)]])
+    capsys.readouterr()
+    labels = json.loads((tmp_path / "drawn" / "labels.json").read_text())
+    (tmp_path / "drawn" / "labels.json").write_text(json.dumps({**labels, "gone.png": []}))
+    assert real_photos.main([str(tmp_path / "drawn"), "--summary"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error == f"real_photos: {tmp_path / 'drawn' / 'gone.png'}: missing or not an image (No such file or directory)"
+    (tmp_path / "drawn" / "labels.json").write_text("{not json")
+    assert real_photos.main([str(tmp_path / "drawn"), "--summary"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith(f"real_photos: {tmp_path / 'drawn' / 'labels.json'}: not JSON (") and "\n" not in error
+
+
 def test_experiment_reports_a_goal_per_set(tmp_path):
     from balltrack.experiments.base import Options
 
