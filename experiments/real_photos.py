@@ -172,12 +172,15 @@ def meets_goal(scored: dict) -> bool:
     return scored["recall"] >= GOAL_RECALL and scored["false_positives_per_image"] <= GOAL_FALSE_POSITIVES
 
 
-def score_sets(folders: list[Path], config: DetectorConfig, plain: bool = True) -> dict[str, dict]:
-    """Per set (folder name): ``{"balltrack": score_folder(...), "plain": ... or None}``."""
+def score_sets(folders: list[Path], config: DetectorConfig, plain: bool = True,
+               variant: Variant | None = None) -> dict[str, dict]:
+    """Per set (folder name): ``{"balltrack": score_folder(...), "plain": ... or None}``;
+    ``variant``: of altered copies of the photos (see ``score_folder``)."""
     scores = {}
     for folder in folders:
-        scores[folder.name] = {"balltrack": score_folder(folder, detect=balltrack_detect(config)),
-                               "plain": score_folder(folder, detect=plain_detect(config)) if plain else None}
+        scores[folder.name] = {
+            "balltrack": score_folder(folder, detect=balltrack_detect(config), variant=variant),
+            "plain": score_folder(folder, detect=plain_detect(config), variant=variant) if plain else None}
     return scores
 
 
@@ -267,18 +270,20 @@ def print_images(name: str, scored: dict) -> None:
           f"({scored['false_positives']}/{scored['images']}), median {scored['median_ms']:.1f} ms/image")
 
 
-def missed_balls(folder, config: DetectorConfig) -> list[dict]:
+def missed_balls(folder, config: DetectorConfig, variant: Variant | None = None) -> list[dict]:
     """Every counted ball of a labelled set that the balltrack detector does not find, with why
     (``services/detector/explain.py``): ``{file, u, v, radius_px, summary, explanation}``, in
-    file order."""
+    file order; ``variant``: in altered copies of the photos (see ``score_folder``)."""
     folder = Path(folder)
     labels = read_labels(folder)
     detector = BallDetector(config)
     missed = []
     for name in sorted(labels):
-        image = labelled_image(folder, name)
+        image, boxes = labelled_image(folder, name), labels[name]
+        if variant is not None:
+            image, boxes = variant(image, boxes)
         result, judged = detector.detect_judged(image)
-        for centre_u, centre_v, radius in counted_balls(labels[name]):
+        for centre_u, centre_v, radius in counted_balls(boxes):
             explanation = explain_place(image, result, judged, config, centre_u, centre_v, radius)
             if explanation["found"] is None:
                 missed.append({"file": name, "u": explanation["u"], "v": explanation["v"],
@@ -287,9 +292,9 @@ def missed_balls(folder, config: DetectorConfig) -> list[dict]:
     return missed
 
 
-def print_misses(folders: list[Path], config: DetectorConfig) -> None:
+def print_misses(folders: list[Path], config: DetectorConfig, variant: Variant | None = None) -> None:
     for folder in folders:
-        missed = missed_balls(folder, config)
+        missed = missed_balls(folder, config, variant)
         print(f"== {folder.name}: {len(missed)} balls of at least {MIN_BALL_PX} px not found")
         for ball in missed:
             print(f"{ball['file']} ball at ({ball['u']:.0f}, {ball['v']:.0f}), radius {ball['radius_px']:.0f} px: "
@@ -313,6 +318,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--misses", action="store_true",
                         help="also list each counted ball the balltrack detector misses, with why "
                              "(the colour there, or the checks its candidate failed)")
+    parser.add_argument("--variant", choices=list(VARIANTS), metavar="NAME",
+                        help="score (and, with --misses, list the misses of) one altered copy of "
+                             "the photos instead of the photos themselves: " + ", ".join(VARIANTS))
     args = parser.parse_args(argv)
     try:
         config = load_config(DetectorConfig, args.config, args.set, section="detector")
@@ -328,7 +336,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         folders.extend(sets)
     try:
-        scores = score_sets(folders, config, plain=not args.no_plain)
+        variant = VARIANTS[args.variant] if args.variant else None
+        scores = score_sets(folders, config, plain=not args.no_plain, variant=variant)
     except (FileNotFoundError, LabelsError) as error:  # (a set whose labels name no image, or are not JSON)
         print(f"real_photos: {error}", file=sys.stderr)
         return 2
@@ -345,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.variants:
         print_variants(folders, config)
     if args.misses:
-        print_misses(folders, config)
+        print_misses(folders, config, variant)
     return 0
 
 

@@ -5,6 +5,7 @@ import json
 
 import cv2
 import numpy as np
+import pytest
 
 from balltrack.experiments import photo_variants, real_photos
 from balltrack.services.detector.config import DetectorConfig
@@ -19,6 +20,18 @@ def write_set(folder, balls_per_image):
         cv2.imwrite(str(folder / name), scene(balls, seed=index))
         labels[name] = [{"x": u - radius, "y": v - radius, "w": 2 * radius, "h": 2 * radius}
                         for u, v, radius in balls]
+    (folder / "labels.json").write_text(json.dumps(labels))
+
+
+def write_set_with_a_pale_ball(folder):
+    """A set of one image: a ball at (200, 240) and, in the labels, a second one at (420, 240)
+    drawn washed out (its saturation far below s_min), which the detector misses."""
+    write_set(folder, [[(200.0, 240.0, 25.0)]])
+    image = cv2.imread(str(folder / "0.png"))
+    pale = draw_ball(image.astype(np.float32), 420.0, 240.0, 25.0, colour=(170, 200, 195))
+    cv2.imwrite(str(folder / "0.png"), np.clip(np.rint(pale), 0, 255).astype(np.uint8))
+    labels = json.loads((folder / "labels.json").read_text())
+    labels["0.png"].append({"x": 395.0, "y": 215.0, "w": 50.0, "h": 50.0})
     (folder / "labels.json").write_text(json.dumps(labels))
 
 
@@ -107,14 +120,7 @@ def test_each_variant_is_scored_per_set(tmp_path):
 
 def test_misses_are_listed_with_why(tmp_path, capsys):
     folder = tmp_path / "drawn"
-    write_set(folder, [[(200.0, 240.0, 25.0)]])
-    # a second ball in the labels, drawn washed out (its saturation far below s_min)
-    image = cv2.imread(str(folder / "0.png"))
-    pale = draw_ball(image.astype(np.float32), 420.0, 240.0, 25.0, colour=(170, 200, 195))
-    cv2.imwrite(str(folder / "0.png"), np.clip(np.rint(pale), 0, 255).astype(np.uint8))
-    labels = json.loads((folder / "labels.json").read_text())
-    labels["0.png"].append({"x": 395.0, "y": 215.0, "w": 50.0, "h": 50.0})
-    (folder / "labels.json").write_text(json.dumps(labels))
+    write_set_with_a_pale_ball(folder)
     (missed,) = real_photos.missed_balls(folder, DetectorConfig())
     assert (missed["file"], missed["u"], missed["v"], missed["radius_px"]) == ("0.png", 420.0, 240.0, 25.0)
     assert "saturation" in missed["summary"] and missed["explanation"]["candidate"] is None
@@ -122,3 +128,21 @@ def test_misses_are_listed_with_why(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "== drawn: 1 balls of at least 20 px not found" in out
     assert "0.png ball at (420, 240), radius 25 px: no candidate" in out
+
+
+def test_one_variant_is_scored_and_its_misses_listed_where_the_variant_moved_them(tmp_path, capsys):
+    folder = tmp_path / "drawn"
+    write_set_with_a_pale_ball(folder)
+    capsys.readouterr()
+    assert real_photos.main([str(folder), "--summary", "--no-plain", "--variant", "mirrored", "--misses"]) == 0
+    out = capsys.readouterr().out
+    # (the found ball and the pale one change sides: 640 - 200 and 640 - 420)
+    assert "drawn" in out and "0.500 (1/2)" in out
+    assert "0.png ball at (220, 240), radius 25 px: no candidate" in out
+    (missed,) = real_photos.missed_balls(folder, DetectorConfig(), photo_variants.VARIANTS["mirrored"])
+    assert (missed["u"], missed["v"]) == (220.0, 240.0)
+    with pytest.raises(SystemExit) as exit:
+        real_photos.main([str(folder), "--variant", "upside down"])
+    assert exit.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert "--variant: invalid choice: 'upside down'" in error and "\n" not in error
