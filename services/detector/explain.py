@@ -45,9 +45,13 @@ def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[J
     (as ``real_photos`` scores), or without ``radius`` when the place is inside a detection.
     Returns ``{"u", "v", "found": {u, v, radius_px, score} or None, "covered_by": {u, v,
     radius_px, score, offset_px} or None, "colour": {hue, saturation, value, mask_share, failed},
-    "candidate": {u, v, radius_px, score, failed} or None}``: ``covered_by`` is a detection
-    whose disc holds the place though its centre is too far from it to count (when none is
-    found), and the candidate is the judged circle nearest the place, one that passed first.
+    "candidate": {u, v, radius_px, score, failed} or None, "around": {u, v, radius_px, score,
+    failed, offset_px} or None}``: ``covered_by`` is a detection whose disc holds the place though
+    its centre is too far from it to count (when none is found), the candidate is the judged
+    circle nearest the place, one that passed first, and ``around`` (when there is no such
+    candidate) the judged circle whose disc holds the place with its centre nearest it: a circle
+    the mask's blob gave that is off the ball (around the ball and a neighbour, or a blob that
+    lacks part of the ball).
     """
     image_bgr = check_image(image_bgr)
 
@@ -61,6 +65,7 @@ def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[J
     covering = [d for d in result.detections if offset(d) <= d.radius_px]
     candidates = [c for c in judged if near(c.u, c.v, c.radius_px)]
     candidates.sort(key=lambda c: (c.score is None, offset(c)))
+    around = None if candidates else min((c for c in judged if offset(c) <= c.radius_px), key=offset, default=None)
     best = min(found, key=offset) if found else None
     cover = min(covering, key=offset) if covering and best is None else None
     return {
@@ -76,6 +81,10 @@ def explain_place(image_bgr: np.ndarray, result: DetectionResult, judged: list[J
             "u": round(candidates[0].u, 1), "v": round(candidates[0].v, 1),
             "radius_px": round(candidates[0].radius_px, 1), "score": candidates[0].score,
             "failed": failed_checks(candidates[0].metrics, config)},
+        "around": None if around is None else {
+            "u": round(around.u, 1), "v": round(around.v, 1), "radius_px": round(around.radius_px, 1),
+            "score": around.score, "failed": failed_checks(around.metrics, config),
+            "offset_px": round(offset(around), 1)},
     }
 
 
@@ -139,5 +148,11 @@ def summary(explanation: dict) -> str:
     colour_figures = f"H {colour['hue']:.0f} S {colour['saturation']:.0f} V {colour['value']:.0f}"
     if colour["failed"]:
         return f"no candidate; the colour here ({colour_figures}) fails: " + "; ".join(colour["failed"])
-    return (f"no candidate; the colour here ({colour_figures}) passes the hue, saturation and chroma "
-            f"tests, colour mask {100 * colour['mask_share']:.0f} % of the place")
+    passes = (f"no candidate; the colour here ({colour_figures}) passes the hue, saturation and chroma "
+              f"tests, colour mask {100 * colour['mask_share']:.0f} % of the place")
+    around = explanation.get("around")
+    if around is None:
+        return passes
+    judgement = "; ".join(around["failed"]) if around["failed"] else "passed, not kept"
+    return (f"{passes}; the circle judged around it is off centre: ({around['u']:.0f}, {around['v']:.0f}), "
+            f"radius {around['radius_px']:.1f} px, {around['offset_px']:.0f} px away: {judgement}")

@@ -69,3 +69,27 @@ def test_a_detection_off_centre_around_the_place_is_named():
     near = explain_place(image, result, [], config, 103.0, 80.0, 12.0)
     assert near["found"] is not None and near["covered_by"] is None
     assert explain_place(image, result, [], config, 160.0, 80.0, 12.0)["covered_by"] is None
+
+
+def test_a_place_with_no_candidate_of_its_own_names_the_off_centre_circle_judged_around_it():
+    config = DetectorConfig()
+    image = draw_ball(floor(), 160.0, 240.0, 30.0)
+    image = to_uint8(draw_box(image, 460, 200, 540, 280, (40, 225, 190)))  # felt-coloured, square
+    result, judged = BallDetector(config).detect_judged(image)
+    # a small ball labelled 15 px off the square's centre: its colour passes, and the circle
+    # judged there is the square's, too far off to be this ball's, and failing on shape
+    square = explain_place(image, result, judged, config, 515.0, 240.0, 10.0)
+    assert square["candidate"] is None and square["colour"]["failed"] == []
+    around = square["around"]
+    assert around is not None and around["score"] is None and around["failed"]
+    assert abs(around["u"] - 500.0) < 4 and 10.0 < around["offset_px"] <= around["radius_px"]
+    assert summary(square).startswith("no candidate; the colour here")
+    assert f"the circle judged around it is off centre: ({around['u']:.0f}, {around['v']:.0f})" in summary(square)
+    assert summary(square).endswith(around["failed"][-1])
+    # one that passed (the ball's, with the detection itself left out of the result)
+    undetected = DetectionResult(detections=[], mask=result.mask)
+    ball = explain_place(image, undetected, judged, config, 178.0, 240.0, 8.0)
+    assert ball["around"] is not None and ball["around"]["score"] is not None
+    assert summary(ball).endswith("px away: passed, not kept")
+    # a place no judged circle holds has none
+    assert explain_place(image, result, judged, config, 300.0, 100.0, 10.0)["around"] is None
