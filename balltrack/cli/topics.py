@@ -24,9 +24,12 @@ POLL_SECONDS = 0.2  # how often a waiting command looks at its stop event
 
 
 def printable(value):
-    """A message with its bytes shown as their size (images would flood the terminal)."""
+    """A message with its bytes shown as their size (images would flood the terminal); large
+    byte fields come out of ``decode`` as memoryviews of the payload."""
     if isinstance(value, (bytes, bytearray)):
         return f"<{len(value)} bytes>"
+    if isinstance(value, memoryview):
+        return f"<{value.nbytes} bytes>"
     if isinstance(value, dict):
         return {key: printable(item) for key, item in value.items()}
     if isinstance(value, list):

@@ -9,8 +9,10 @@ import time
 import tomllib
 
 import cv2
+import numpy as np
 import pytest
 
+from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode
 from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, client, draw_ball, floor_image,
                            process_environment, start_service)
@@ -257,12 +259,28 @@ def test_status_config_echo_hz(router, session, log_dir):
     assert locator.stop() == 0
 
 
-def _publish_until_done(session, process, deadline_seconds=30.0):
-    """Put camera_info until ``process`` exits (its subscription is declared asynchronously)."""
+def test_echo_shows_an_images_pixels_as_their_size(router, session, log_dir):
+    # (pixels of at least messages.SHARED_BIN_MIN bytes come out of decode as a memoryview of
+    # the payload, not as bytes: a 640x480 frame, not a thumbnail)
+    image = np.zeros((480, 640, 3), np.uint8)
+    echo = Process([sys.executable, "-m", "balltrack", "echo", "camera/image_raw", "--count", "1",
+                    "--connect", router.endpoint], log_dir / "echo.log")
+    _publish_until_done(session, echo.popen, key="camera/image_raw",
+                        payload=encode("Image", bgr_to_message(image, 10, 1)))
+    assert echo.popen.returncode == 0, echo.output()
+    (printed,) = [json.loads(line) for line in echo.output().splitlines() if line.startswith("{")]
+    assert printed["message"]["data"] == f"<{image.nbytes} bytes>"
+    assert printed["message"]["width"] == 640 and "Traceback" not in echo.output()
+
+
+def _publish_until_done(session, process, deadline_seconds=30.0, key="camera/camera_info", payload=None):
+    """Put ``payload`` (default: camera_info) on ``key`` until ``process`` exits (its
+    subscription is declared asynchronously)."""
+    payload = payload if payload is not None else encode("CameraInfo", CAMERA_INFO)
     deadline = time.monotonic() + deadline_seconds
     while process.poll() is None:
         assert time.monotonic() < deadline, "the command did not finish"
-        session.put("camera/camera_info", encode("CameraInfo", CAMERA_INFO))
+        session.put(key, payload)
         try:
             process.wait(0.05)
         except subprocess.TimeoutExpired:
