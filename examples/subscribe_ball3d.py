@@ -50,6 +50,13 @@ def printed(line: str) -> bool:
         return False
 
 
+def zenoh_reason(error: Exception) -> str:
+    """The first line of a Zenoh error, without the Rust source location it ends with or the
+    wrapping of a configuration error (``Json5Err(Message { msg: "...``)."""
+    line = (str(error).strip().splitlines() or [repr(error)])[0].split(" at /")[0]
+    return line.split('msg: "', 1)[-1].rstrip('"')
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description="print the ball's 3D position")
     parser.add_argument("--connect", action="append", metavar="ENDPOINT",
@@ -72,7 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     # A client of the router, as the balltrack services are; no multicast discovery.
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
+    try:
+        config.insert_json5("connect/endpoints", json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
+    except zenoh.ZError as error:  # not an endpoint (tcp/HOST:PORT)
+        parser.error(f"--connect {' '.join(args.connect)}: {zenoh_reason(error)}")
     config.insert_json5("scouting/multicast/enabled", "false")
     key = f"{args.namespace.strip('/')}/detected_ball_3d" if args.namespace.strip("/") else "detected_ball_3d"
 
@@ -102,13 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         session = zenoh.open(config)
     except Exception as error:  # no router at that endpoint
-        reason = (str(error).strip().splitlines() or [repr(error)])[0].split(" at /")[0]
         print(f"cannot reach a router at {', '.join(args.connect or ['tcp/127.0.0.1:7447'])}: "
-              f"{reason}", file=sys.stderr)
+              f"{zenoh_reason(error)}", file=sys.stderr)
         return 1
     subscriber = session.declare_subscriber(key, on_sample)
-    if not printed(f"listening on {key} (Ctrl-C to stop)"):
-        stop.set()
+    # (on stderr: stdout holds only the positions, for a pipe or a file)
+    print(f"listening on {key} (Ctrl-C to stop)", file=sys.stderr, flush=True)
     while not stop.wait(0.2):
         pass
     subscriber.undeclare()

@@ -75,12 +75,14 @@ def test_a_command_whose_reader_is_gone_ends_quietly(tmp_path, arguments):
     assert finished.stderr == ""
 
 
-@pytest.mark.parametrize("arguments", [["--count", "-1"], ["--no-such-option"]])
+@pytest.mark.parametrize("arguments", [["--count", "-1"], ["--no-such-option"],
+                                       ["--connect", "localhost:7447"]])  # (no protocol: not an endpoint)
 def test_the_example_subscriber_refuses_a_bad_argument_in_one_line(arguments):
     finished = subprocess.run([sys.executable, str(REPO / "examples" / "subscribe_ball3d.py"), *arguments],
                               capture_output=True, text=True, timeout=60)
     assert finished.returncode == 2
     assert len(finished.stderr.strip().splitlines()) == 1, finished.stderr
+    assert "Traceback" not in finished.stderr
 
 
 def descendants(pid: int) -> set[int]:
