@@ -32,6 +32,8 @@ import typing
 from pathlib import Path
 from typing import Any, Iterable, TypeVar
 
+from balltrack.common.keys import SERVICES
+
 T = TypeVar("T")
 
 # The key under which param() stores its declaration in dataclasses.field(metadata=...).
@@ -341,7 +343,10 @@ def settings_by_service(items: Iterable[str], services: Iterable[str], among: st
 
 
 def read_config_file(path: str | Path, section: str | None = None) -> dict[str, Any]:
-    """Read a TOML file; keys at top level or under ``[section]`` (the service's name)."""
+    """Read a TOML file: its top-level keys, then those of its ``[section]`` table (the
+    service's name), which win. One file may hold several services' tables; a table that is no
+    service's (``[detectr]``), or a file with neither top-level keys nor the service's table,
+    is a ConfigError: either would leave every parameter at its default without a word."""
     try:
         with open(path, "rb") as handle:
             data = tomllib.load(handle)
@@ -353,9 +358,18 @@ def read_config_file(path: str | Path, section: str | None = None) -> dict[str, 
         raise ConfigError(f"{path}: not valid TOML ({error})") from None
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not valid TOML (not UTF-8 text)") from None
-    if section and isinstance(data.get(section), dict):
-        return dict(data[section])
-    return {key: value for key, value in data.items() if not isinstance(value, dict)}
+    tables = {key: value for key, value in data.items() if isinstance(value, dict)}
+    known = (*SERVICES, section) if section else SERVICES
+    for name in tables:
+        if name not in known:
+            raise ConfigError(f"{path}: [{name}] is not a service's table (tables: {', '.join(SERVICES)})")
+    settings = {key: value for key, value in data.items() if key not in tables}
+    if section and section in tables:
+        settings.update(tables[section])
+    elif section and tables and not settings:
+        raise ConfigError(f"{path}: no [{section}] table and no top-level keys for {section} "
+                          f"(its tables: {', '.join(f'[{name}]' for name in tables)})")
+    return settings
 
 
 def load_config(cls: type[T], path: str | Path | None = None, overrides: Iterable[str] = (),

@@ -136,11 +136,27 @@ class ExampleConfig:
 
 def test_config_file_then_overrides(tmp_path):
     path = tmp_path / "example.toml"
-    path.write_text('gain = 0.25\nname = "from-file"\n[other]\ncount = 9\n')
+    path.write_text('gain = 0.25\nname = "from-file"\n[locator]\ncount = 9\nname = "table"\n')
     config = load_config(ExampleConfig, path, ["count=7", "enabled=false", "levels=[0.5, 1]"])
     assert (config.gain, config.count, config.enabled, config.name, config.levels) == \
         (0.25, 7, False, "from-file", [0.5, 1.0])
-    assert load_config(ExampleConfig, path, section="other").count == 9
+    # the service's table on top of the top-level keys (they used to be dropped beside it)
+    config = load_config(ExampleConfig, path, section="locator")
+    assert (config.gain, config.count, config.name) == (0.25, 9, "table")
+    # another service's table is that service's: a shared file
+    assert load_config(ExampleConfig, path, section="detector").count == 3
+
+
+@pytest.mark.parametrize("text, section, reason", [
+    ('[detectr]\ncount = 9\n', "detector", r"\[detectr\] is not a service's table \(tables: detector, locator"),
+    ('gain = 0.2\n[detectr]\ncount = 9\n', None, r"\[detectr\] is not a service's table"),
+    ('[locator]\ncount = 9\n', "detector", r"no \[detector\] table and no top-level keys for detector \(its tables: \[locator\]\)"),
+])
+def test_a_config_file_whose_tables_are_not_the_services_is_refused(tmp_path, text, section, reason):
+    path = tmp_path / "example.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=reason):
+        load_config(ExampleConfig, path, section=section)
 
 
 @pytest.mark.parametrize("overrides, reason", [
