@@ -94,6 +94,14 @@ class SimulatorConfig:
             raise ConfigError(f"timestep: must not exceed the camera period 1/rate_hz "
                               f"({1.0 / self.rate_hz:.4g} s), got {self.timestep}")
 
+    def preflight(self) -> None:
+        """The scenario reads and is valid (see ``common.runner.preflight``): a misspelt name
+        or a bad scenario file is refused before a router answers, not after the wait for one;
+        the simulator reads it again when it starts."""
+        from balltrack.services.simulator.scenario import load_scenario
+
+        load_scenario(self.scenario)  # (ConfigError naming the file and the problem)
+
     @property
     def vfov(self) -> float:
         """Vertical field of view (radians) implied by hfov and the aspect ratio."""

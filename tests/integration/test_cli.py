@@ -150,6 +150,9 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
     (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
     (["run", "detector", "--config", "."], "detector: .: cannot read the config file (Is a directory)"),
+    # (a scenario that is not there: said at once, not after 30 s of waiting for a router)
+    (["run", "simulator", "--set", "scenario=nosuch", "--connect", "tcp/127.0.0.1:9"],
+     "nosuch.toml: no such scenario file (shipped scenarios: chase,"),
     (["deploy", "start", "--services", "detector+locator,locator"], "a service may run once"),
     (["deploy", "start", "--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])
