@@ -1,5 +1,6 @@
 """Local TCP ports for routers started by the demo, the experiments and the tests."""
 
+import errno
 import socket
 
 
@@ -15,3 +16,18 @@ def free_port(preferred: int = 0, host: str = "127.0.0.1") -> int:
                 continue
             return probe.getsockname()[1]
     raise OSError(f"no free TCP port on {host}")
+
+
+def port_taken(port: int, host: str = "0.0.0.0") -> bool:
+    """Whether a socket already listens on TCP ``port`` at ``host`` (a router's ``--listen``
+    address: 0.0.0.0, an interface's IPv4 or IPv6 address). As a router binds, with
+    SO_REUSEADDR: connections of a router just stopped, in TIME_WAIT, do not count."""
+    host = host.strip("[]") or "0.0.0.0"
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as error:
+            return error.errno == errno.EADDRINUSE
+    return False

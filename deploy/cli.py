@@ -27,6 +27,7 @@ from pathlib import Path
 from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
+from balltrack.common.network import port_taken
 from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
                                       default_endpoints, load_config_file, router_config,
                                       secure_client_path, secure_router_path)
@@ -52,6 +53,11 @@ def endpoint_port(endpoint: str) -> int | None:
         return int(address.rsplit(":", 1)[1])
     except (IndexError, ValueError):
         return None
+
+
+def listen_host(listen: str) -> str:
+    """The address part of ``tcp/HOST:PORT``."""
+    return listen.partition("/")[2].split("#", 1)[0].rpartition(":")[0]
 
 
 def local_endpoint(listen: str) -> str:
@@ -153,6 +159,11 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
         port = endpoint_port(listen[0]) if listen[0].startswith(("tcp/", "tls/")) else None
         if port == 0:
             raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
+        # (else the services would find and join whatever holds the port, while our router
+        # fails to listen and is restarted for ever)
+        if port is not None and port_taken(port, listen_host(listen[0])):
+            raise LaunchError(f"--listen {listen[0]}: port {port} is in use (another router? stop it, "
+                              "or give --listen another port)")
         specs.append(ChildSpec("router", argv, port=port))
 
     # (services of a router started here, dialling it on this host, may link to each other)

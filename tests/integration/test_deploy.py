@@ -117,6 +117,17 @@ def test_start_rejects_bad_options_and_a_bad_config(tmp_path):
     assert not list(run_dir.glob("*.pid"))
 
 
+def test_start_refuses_a_router_port_that_another_router_holds(router, tmp_path):
+    # (the services would join that router, ours failing to listen and restarted for ever)
+    listen = f"tcp/127.0.0.1:{router.port}"
+    result = deploy("start", "--router", "--listen", listen, "--services", "locator",
+                    "--run-dir", str(tmp_path / "run"))
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stderr.strip() == (f"deploy start: --listen {listen}: port {router.port} is in use "
+                                     "(another router? stop it, or give --listen another port)")
+    assert not (tmp_path / "run" / "supervisor.pid").exists()
+
+
 def test_example_subscriber_prints_ball_positions(router, session, tmp_path):
     example = Process([sys.executable, str(REPO / "examples" / "subscribe_ball3d.py"), "--connect",
                        router.endpoint, "--count", "2", "--validate"], tmp_path / "example.log")
@@ -148,7 +159,8 @@ def test_example_subscriber_in_a_pipe_ends_quietly_when_the_reader_goes(router, 
                                 router.endpoint], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                env=process_environment())
     try:
-        assert example.stdout.readline().startswith(b"listening on detected_ball_3d")
+        # (on stderr: stdout holds only the positions)
+        assert example.stderr.readline().startswith(b"listening on detected_ball_3d")
         publisher = session.declare_publisher("detected_ball_3d")
         ball = {"header": {**header(123, 7), "frame_id": "camera_optical"},
                 "x": 0.1, "y": 0.05, "z": 1.5, "distance": 1.504}
