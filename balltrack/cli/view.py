@@ -35,8 +35,9 @@ def _serve_rerun(args, session, stop) -> int:
         return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
                            f"{str(error).strip().splitlines()[0]}", 1)
     bridge = RerunBridge(session, recording, args.namespace)
-    print(f"balltrack view: Rerun viewer on http://127.0.0.1:{args.port} (data: {server}; Ctrl-C to stop)",
-          file=sys.stderr, flush=True)
+    # (Rerun's Python API binds every interface, and serves without a password)
+    print(f"balltrack view: Rerun viewer on http://127.0.0.1:{args.port} (data: {server}; served on every "
+          "interface, to anyone who reaches these ports; Ctrl-C to stop)", file=sys.stderr, flush=True)
     stop.wait()
     bridge.close()
     recording.disconnect()
