@@ -97,8 +97,9 @@ def command_config(args) -> int:
     if config is None:
         return status
     if action == "dump":
-        sys.stdout.write(f"# balltrack config dump {service}: load with `balltrack config load "
-                         f"{service} FILE` or start with --config (as TOML)\n")
+        # (YAML, as `ros2 param dump`; --config reads TOML)
+        sys.stdout.write(f"# balltrack config dump {service}: load with `balltrack config load {service} "
+                         "FILE`; --config at start takes these keys as TOML (key = value), not this YAML\n")
         sys.stdout.write(yaml.safe_dump(config, sort_keys=False))
     elif action == "load":
         print(f"{service}: {len(changes)} parameters loaded", file=sys.stderr)
