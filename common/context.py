@@ -131,6 +131,10 @@ class ServiceContext:
         self.rejections = RateLimitedLog(self.log)
         self._config = config
         self._config_listeners: list[Callable[[Any], None]] = []
+        # The settings a running service applies when changed (its ``<service>/config``); a
+        # change to any other is refused, as ROS 2 refuses a read-only parameter: accepted, it
+        # would be reported as set and never take effect. None: every setting.
+        self.live_settings: set[str] | None = None
         self._declared: list = []
         # Subscribers whose worker waits in their ``recv``: undeclared to let it return.
         self._waited_on: list = []
@@ -151,6 +155,12 @@ class ServiceContext:
         new_config = replace_config(self._config, changes)
         if getattr(new_config, "use_sim_time", None) != getattr(self._config, "use_sim_time", None):
             raise ConfigError("use_sim_time: can only be set at start")
+        if self.live_settings is not None:
+            fixed = [name for name in vars(new_config) if name not in self.live_settings
+                     and getattr(new_config, name) != getattr(self._config, name)]
+            if fixed:
+                raise ConfigError(f"{', '.join(fixed)}: can only be set at start (live: "
+                                  f"{', '.join(sorted(self.live_settings))})")
         self._config = new_config
         for listener in self._config_listeners:
             listener(new_config)

@@ -3,7 +3,7 @@
     balltrack config detector                    # read (JSON)
     balltrack config detector v_min=30 param2=18 # change live (all or nothing)
     balltrack config dump detector > detector.yaml
-    balltrack config load detector detector.yaml # the same file works as --config for a start
+    balltrack config load detector detector.yaml # set them again (--config at start reads TOML)
     balltrack config detector --describe         # every parameter: type, default, bounds, meaning
 """
 

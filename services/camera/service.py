@@ -64,14 +64,8 @@ def build(service: ServiceContext):
         if "info" in latest:  # before the first frame the size is not known: no answer
             query.reply(query.key_expr, encode("CameraInfo", latest["info"]))
 
-    def on_config_change(new: CameraConfig) -> None:
-        for name in sorted(set(vars(new)) - LIVE_SETTINGS):
-            if getattr(new, name) != getattr(started_with, name):
-                service.log.warning("%s: the running camera keeps %r until a restart",
-                                    name, getattr(started_with, name))
-
     service.queryable(keys.CAMERA_INFO, on_camera_info_query)
-    service.on_config_change(on_config_change)
+    service.live_settings = LIVE_SETTINGS
     service.stats.extra = feed.stats
 
     def loop(context: ServiceContext) -> None:

@@ -134,16 +134,10 @@ def build(service: ServiceContext):
     def on_token(key_expr, alive: bool) -> None:
         gate.set_alive(service.keys.strip(str(key_expr)).split("/", 1)[1], alive)
 
-    def on_config_change(config: SimulatorConfig) -> None:
-        for name in sorted(set(vars(config)) - LIVE_SETTINGS):
-            if getattr(config, name) != getattr(simulation.config, name):
-                service.log.warning("%s: the running simulation keeps %r until a restart",
-                                    name, getattr(simulation.config, name))
-
     service.subscribe(keys.CMD_VEL, "Twist", on_command)
     service.subscribe(keys.DETECTED_BALLS, "Ball2DArray",
                       lambda balls: gate.answered(balls["header"]["seq"]), count=False)
-    service.on_config_change(on_config_change)
+    service.live_settings = LIVE_SETTINGS
     service.queryable(keys.CAMERA_INFO, lambda query: query.reply(
         query.key_expr, encode("CameraInfo", camera_info())))
     service.queryable(keys.SIM_CONTROL, on_control)

@@ -66,7 +66,11 @@ def test_photos_with_a_calibration_loop_in_order(session, launch, photos, tmp_pa
     replies = [reply for reply in session.get("camera/camera_info", timeout=5.0) if reply.ok is not None]
     assert len(replies) == 1
 
-    # Live: the encoding changes; source changes are kept until a restart.
+    # Live: the encoding changes; a source change is refused (it takes a restart; accepted, it
+    # was reported as set while the camera went on with the old source).
+    refused = query_config(session, "camera", {"source": str(tmp_path / "other.mp4")})
+    assert not refused["ok"] and refused["error"].startswith("source: can only be set at start (live: ")
+    assert query_config(session, "camera")["config"]["source"] != str(tmp_path / "other.mp4")
     assert query_config(session, "camera", {"encoding": "jpeg"})["ok"]
     images.wait_for(lambda m: m[-1]["encoding"] == "jpeg", 10, "a jpeg frame")
     stats = Collector(session, "camera/stats", "Stats").wait_count(1, 5)[0]
