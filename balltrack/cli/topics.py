@@ -21,6 +21,9 @@ from balltrack.common.messages import SCHEMAS, MessageError, decode
 from balltrack.common.shutdown import stop_on_signals
 
 POLL_SECONDS = 0.2  # how often a waiting command looks at its stop event
+# A median delay past this (a day, in ms) says the stamps are on another clock than the wall's:
+# the simulator's, which starts at 0.
+NOT_WALL_CLOCK_MS = 86_400_000.0
 
 
 def printable(value):
@@ -179,7 +182,10 @@ def command_delay(args) -> int:
         delays = [delay for _, delay in items]
         if not delays:
             return f"{key}: no stamped messages in {args.window:.1f} s"
-        return f"{key}: delay {spread(delays, 'ms', 2)}"
+        line = f"{key}: delay {spread(delays, 'ms', 2)}"
+        if not args.use_sim_time and abs(statistics.median(delays)) > NOT_WALL_CLOCK_MS:
+            line += " (the stamps are not wall-clock time: a simulator's? try --use-sim-time)"
+        return line
 
     report = _reporter(args, describe)
 

@@ -22,15 +22,17 @@ def balltrack(*arguments, cwd=None, timeout=60):
 
 
 @pytest.fixture
-def camera_info_stream(session):
-    """CameraInfo stamped with the wall clock, at PUBLISH_HZ, while the test runs."""
+def camera_info_stream(session, request):
+    """CameraInfo stamped with the wall clock (or, parametrised, the clock it names: a function
+    of no argument, ns), at PUBLISH_HZ, while the test runs."""
     stop = threading.Event()
+    clock = getattr(request, "param", time.time_ns)
 
     def publish():
         seq = 0
         while not stop.is_set():
             session.put("camera/camera_info",
-                        encode("CameraInfo", {**CAMERA_INFO, "header": header(time.time_ns(), seq)}))
+                        encode("CameraInfo", {**CAMERA_INFO, "header": header(clock(), seq)}))
             seq += 1
             stop.wait(1.0 / PUBLISH_HZ)  # the stream's rate, not a synchronisation
 
@@ -102,6 +104,16 @@ def test_bw_and_delay_report_the_stream(router, session, camera_info_stream, com
     if command == "delay":
         mean_ms = float(lines[-1].split("delay mean ")[1].split(" ms")[0])
         assert 0 <= mean_ms < 5000  # stamped with the wall clock just before sending
+        assert "not wall-clock" not in shown.stdout
+
+
+# (a simulator's stamps: its time since the start, seconds where the wall clock has 1.7e9)
+@pytest.mark.parametrize("camera_info_stream", [lambda: 5_000_000_000], indirect=True)
+def test_delay_of_stamps_on_another_clock_says_so(router, session, camera_info_stream):
+    shown = balltrack("delay", "camera/camera_info", "--window", "1", "--count", "1",
+                      "--connect", router.endpoint)
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stdout.strip().endswith("(the stamps are not wall-clock time: a simulator's? try --use-sim-time)")
 
 
 def test_config_dump_then_load_restores_parameters(router, locator, tmp_path):
