@@ -47,21 +47,43 @@ class Graph:
             graph.declared[parts[3]]["/".join(parts[4:])] |= zids
         return graph
 
-    def names(self, keys: Keys) -> dict[str, str]:
-        """Zenoh id -> service name, from the ``alive/<service>`` tokens."""
-        result = {}
+    def names(self, keys: Keys) -> dict[str, list[str]]:
+        """Zenoh id -> the services of that session (sorted), from the ``alive/<service>``
+        tokens: several for services joined in one process (``balltrack run a+b``)."""
+        result: dict[str, set[str]] = defaultdict(set)
         for key, zids in self.declared["token"].items():
             stripped = keys.strip(key)
             if stripped.startswith("alive/"):
-                result.update({zid: stripped.split("/", 1)[1] for zid in zids})
-        return result
+                for zid in zids:
+                    result[zid].add(stripped.split("/", 1)[1])
+        return {zid: sorted(services) for zid, services in result.items()}
 
     def who(self, kind: str, full_key: str, keys: Keys) -> list[str]:
         names = self.names(keys)
-        return sorted(names.get(zid, zid[:8]) for zid in self.declared[kind].get(full_key, ()))
+        key = keys.strip(full_key)
+        return sorted(_holder(kind, key, names[zid]) if zid in names else zid[:8]
+                      for zid in self.declared[kind].get(full_key, ()))
 
     def keys(self, kind: str) -> set[str]:
         return set(self.declared[kind])
+
+
+def _holder(kind: str, key: str, services: list[str]) -> str:
+    """Which of the services of one session declared ``key``: the one the key is of
+    (``locator/stats``) or, for a publisher, the one the key table names (``detected_ball_3d``:
+    the locator); else all of them, joined as the process is (``detector+locator``)."""
+    if len(services) == 1:
+        return services[0]
+    first, _, rest = key.partition("/")
+    owner = rest if first == "alive" else first
+    if owner in services:
+        return owner
+    if kind == "publisher":
+        named = [spec.publisher.split(" or ") for spec in key_table.TABLE if spec.key == key]
+        among = [service for service in (named[0] if named else []) if service in services]
+        if len(among) == 1:
+            return among[0]
+    return key_table.PROCESS_JOIN.join(services)
 
 
 def _listen(session, expression: str, window: float, stop) -> dict[str, list[tuple[float, int]]]:
