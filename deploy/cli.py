@@ -384,9 +384,14 @@ def collect_status(run_dir: Path, timeout: float, network: bool = True) -> dict:
         alive, stats, error = network_status(supervisor, timeout)
         result["network_error"] = error
         for name, child in status["children"].items():
-            if name in SERVICES:
+            services = [service for service in process_services(name) if service in SERVICES]
+            if len(services) == 1:
                 child["alive"] = None if alive is None else name in alive
                 child["stats"] = stats.get(name)
+            elif services:  # (services joined in one process: alive when all of them are)
+                child["services"] = {service: {"alive": None if alive is None else service in alive,
+                                               "stats": stats.get(service)} for service in services}
+                child["alive"] = None if alive is None else all(service in alive for service in services)
     return result
 
 

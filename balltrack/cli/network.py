@@ -84,16 +84,26 @@ def _run_folder_status(args) -> int:
     print(f"supervisor pid {supervisor.get('pid')} {state}; run folder {run_dir}")
     if result.get("network_error"):
         print(f"network: {result['network_error']}")
-    print(f"{'name':<12} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
+    # (a process of joined services is named after all of them: detector+locator+follower)
+    width = max([12, *(len(name) for name in result["children"])])
+    print(f"{'name':<{width}} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
           f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7}")
-    for name, child in result["children"].items():
-        alive = {True: "yes", False: "no", None: "?"}[child.get("alive")] if "alive" in child else "-"
-        stats = child.get("stats")
+
+    def shown(entry: dict) -> tuple[str, str]:
+        alive = {True: "yes", False: "no", None: "?"}[entry.get("alive")] if "alive" in entry else "-"
+        stats = entry.get("stats")
         figures = (f"{stats['received']:>8} {stats['published']:>9} {stats['rejected']:>8} "
                    f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f}") if stats else ""
+        return alive, figures
+
+    for name, child in result["children"].items():
+        alive, figures = shown(child)
         pid = child["pid"] if child.get("running") else "-"
-        print(f"{name:<12} {pid!s:>7} {child['state']:<8} {child['restarts']:>8} "
-              f"{child.get('last_exit_text') or '-':<18} {alive:<5} {figures}")
+        print(f"{name:<{width}} {pid!s:>7} {child['state']:<8} {child['restarts']:>8} "
+              f"{child.get('last_exit_text') or '-':<18} {alive:<5} {figures}".rstrip())
+        for service, entry in child.get("services", {}).items():  # (each of a joined process's)
+            alive, figures = shown(entry)
+            print(f"{'  ' + service:<{width}} {'':>7} {'':<8} {'':>8} {'':<18} {alive:<5} {figures}".rstrip())
     return 0 if supervisor["running"] else 1
 
 

@@ -117,6 +117,26 @@ def test_start_rejects_bad_options_and_a_bad_config(tmp_path):
     assert not list(run_dir.glob("*.pid"))
 
 
+def test_status_of_a_run_folder_shows_each_service_of_a_joined_process(tmp_path):
+    run_dir = tmp_path / "run"
+    started = deploy("start", "--router", "--listen", f"tcp/127.0.0.1:{free_port()}", "--services",
+                     "locator+follower", "--run-dir", str(run_dir), "--wait", "60")
+    assert started.returncode == 0, started.stdout + started.stderr
+    try:
+        shown = status_of(run_dir)
+        assert shown.returncode == 0, shown.stdout + shown.stderr
+        joined = json.loads(shown.stdout)["children"]["locator+follower"]
+        # (it showed '-', as if not a service: only single services were looked up)
+        assert joined["alive"] is True
+        assert {name: entry["alive"] for name, entry in joined["services"].items()} == {"locator": True, "follower": True}
+        text = subprocess.run([sys.executable, "-m", "balltrack", "status", "--run-dir", str(run_dir)], cwd=REPO,
+                              env=process_environment(), capture_output=True, text=True, timeout=60).stdout
+        rows = {line.split()[0]: line.split() for line in text.splitlines()[2:]}
+        assert rows["locator+follower"][5] == "yes" and rows["locator"][1] == "yes" and rows["follower"][1] == "yes"
+    finally:
+        assert deploy("stop", "--run-dir", str(run_dir)).returncode == 0
+
+
 def test_start_refuses_a_router_port_that_another_router_holds(router, tmp_path):
     # (the services would join that router, ours failing to listen and restarted for ever)
     listen = f"tcp/127.0.0.1:{router.port}"
