@@ -21,7 +21,6 @@ import argparse
 import logging
 import os
 import sys
-import threading
 import time
 from typing import Any, Callable
 
@@ -33,7 +32,7 @@ from balltrack.common.context import ServiceContext
 from balltrack.common.keys import PROCESS_JOIN, Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
-                                      open_from_args, peer_conflict)
+                                      open_until_stopped, peer_conflict)
 from balltrack.common.shutdown import stop_on_signals
 
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
@@ -161,31 +160,17 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
     # The session opens in a thread so that SIGINT/SIGTERM while the router is still
     # unreachable ends the service at once with status 0, as when it is running.
     stop = stop_on_signals()
-    opened: dict[str, Any] = {}
-
-    def open_session():
-        try:
-            opened["session"] = open_from_args(args)
-        except SessionOpenError as error:
-            opened["error"] = error
-        except ZenohConfigError as error:  # (a bad --connect or --zenoh-config: not worth waiting for)
-            opened["refused"] = error
-        finally:
-            opened["done"] = True
-
-    threading.Thread(target=open_session, name=f"{label}-open", daemon=True).start()
-    while "done" not in opened and not stop.wait(0.1):
-        pass
-    if "error" in opened:
-        print(f"{label}: {opened['error']}", file=sys.stderr)
+    try:
+        session = open_until_stopped(args, stop)
+    except SessionOpenError as error:
+        print(f"{label}: {error}", file=sys.stderr)
         return 1
-    if "refused" in opened:
-        print(f"{label}: {opened['refused']}", file=sys.stderr)
+    except ZenohConfigError as error:  # (a bad --connect or --zenoh-config: not worth waiting for)
+        print(f"{label}: {error}", file=sys.stderr)
         return 2
-    if "session" not in opened:
+    if session is None:
         logging.getLogger(label).info("stopped before a router answered")
         os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined
-    session = opened["session"]
 
     contexts = [ServiceContext(name, session, args.namespace, config, stop) for name, config, _ in services]
     status = 0

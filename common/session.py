@@ -19,7 +19,9 @@ import argparse
 import json
 import os
 import re
+import threading
 from pathlib import Path
+from typing import Any
 
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
@@ -240,6 +242,30 @@ def close_session(session) -> str | None:
         return f"the router was not told that this session closed ({zenoh_reason(error)}); " \
                "it forgets the session when its lease ends"
     return None
+
+
+def open_until_stopped(args, stop, open_timeout: float | None = None):
+    """``open_from_args`` in a thread of its own, so that ``stop`` (SIGINT, SIGTERM) set while
+    the router is still out of reach ends the wait at once: the session, or None when stopped
+    first; SessionOpenError and ZenohConfigError as ``open_from_args`` raises them. When None,
+    the opening thread is still inside Zenoh and cannot be joined: the caller ends the process
+    with ``os._exit`` (nothing is open to close)."""
+    opened: dict[str, Any] = {}
+
+    def opening() -> None:
+        try:
+            opened["session"] = open_from_args(args, open_timeout)
+        except (SessionOpenError, ZenohConfigError) as error:
+            opened["error"] = error
+        finally:
+            opened["done"] = True
+
+    threading.Thread(target=opening, name="session-open", daemon=True).start()
+    while "done" not in opened and not stop.wait(0.1):
+        pass
+    if "error" in opened:
+        raise opened["error"]
+    return opened.get("session")
 
 
 def open_from_args(args, open_timeout: float | None = None):

@@ -114,7 +114,7 @@ def _message_type(keys: Keys, full_key: str) -> str:
 
 def _snapshot(args):
     stop = stop_on_signals()
-    session = open_or_report(args)
+    session = open_or_report(args, stop)
     if session is None:
         return None
     keys = Keys(args.namespace)

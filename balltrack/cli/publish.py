@@ -58,7 +58,7 @@ def command_pub(args) -> int:
         print(f"balltrack pub: {message_name}: {error}", file=sys.stderr)
         return 2
     stop = stop_on_signals()
-    session = open_or_report(args)
+    session = open_or_report(args, stop)
     if session is None:
         return 1
     try:

@@ -69,7 +69,7 @@ def command_record(args) -> int:
         os.nice(args.nice)  # before the session: threads take the priority of their creator
     keep_freed_memory()  # (frames come and go at 30 a second)
     stop = stop_on_signals()
-    session = open_or_report(args)
+    session = open_or_report(args, stop)
     if session is None:
         return 1
     out = Output(stop)
@@ -125,7 +125,7 @@ def command_play(args) -> int:
         except RecordingError as error:
             return _fail(args, str(error), 2)
         stop = stop_on_signals()
-        session = open_or_report(args)
+        session = open_or_report(args, stop)
         if session is None:
             return 1
         out = Output(stop)

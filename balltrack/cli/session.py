@@ -1,10 +1,11 @@
 """What every networked ``balltrack`` command shares: its options and opening its session."""
 
+import os
 import sys
 
 from balltrack.common.arguments import number
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
-                                      open_from_args)
+                                      open_from_args, open_until_stopped)
 
 
 def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0, peer: bool = False):
@@ -17,13 +18,22 @@ def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0
     return sub
 
 
-def open_or_report(args):
-    """The session, or None after a one-line reason on stderr."""
+def open_or_report(args, stop=None):
+    """The session, or None after a one-line reason on stderr. ``stop``: the command's event
+    of SIGINT and SIGTERM; set while the router is still out of reach, it ends the command at
+    once, status 0, as it does once the command runs (without it, the wait goes on for up to
+    ``--timeout`` seconds)."""
     try:
-        return open_from_args(args, open_timeout=args.timeout)
+        if stop is None:
+            return open_from_args(args, open_timeout=args.timeout)
+        session = open_until_stopped(args, stop, open_timeout=args.timeout)
     except (SessionOpenError, ZenohConfigError) as error:
         print(f"balltrack {args.command}: {error}", file=sys.stderr)
         return None
+    if session is None:
+        sys.stdout.flush()
+        os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined
+    return session
 
 
 def close_or_report(args, session) -> None:

@@ -43,7 +43,7 @@ def printable(value):
 def _watch(args, on_sample, report=None, period: float = POLL_SECONDS, on_open=None) -> int:
     """Subscribe to ``args.key`` until stopped; ``report()`` runs every ``period`` seconds."""
     stop = stop_on_signals()
-    session = open_or_report(args)
+    session = open_or_report(args, stop)
     if session is None:
         return 1
     out = Output(stop)

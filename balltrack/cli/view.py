@@ -85,7 +85,7 @@ def command_view(args) -> int:
     except ImportError as error:
         return _fail(args, f"{error.name} is not installed (pip install 'balltrack[view]')", 1)
     stop = stop_on_signals()
-    session = open_or_report(args)
+    session = open_or_report(args, stop)
     if session is None:
         return 1
     try:

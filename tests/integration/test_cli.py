@@ -227,6 +227,18 @@ def test_no_router_is_a_clear_error():
     assert result.returncode == 1 and "cannot reach a Zenoh router" in result.stderr
 
 
+@pytest.mark.parametrize("command", [["echo", "detected_ball"], ["topic", "list"]])
+def test_a_command_still_waiting_for_its_router_stops_at_once_on_sigterm(log_dir, command):
+    # (nothing listens on port 9: the command waits for its router up to --timeout, 60 s)
+    process = Process([sys.executable, "-m", "balltrack", *command, "--connect", "tcp/127.0.0.1:9",
+                       "--timeout", "60"], log_dir / "command.log")
+    process.wait_for_signal_handler(signal.SIGTERM, 30)
+    process.popen.terminate()
+    # (it used to wait the 60 s out, then say it could not reach a router, status 1)
+    assert process.popen.wait(timeout=15) == 0, process.output()
+    assert "cannot reach" not in process.output()
+
+
 def test_status_config_echo_hz(router, session, log_dir):
     locator = start_service("locator", router.endpoint, log_dir)
     Liveliness(session).wait("locator")
