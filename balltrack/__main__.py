@@ -1,5 +1,5 @@
 import sys
 
-from balltrack.cli import main
+from balltrack.cli import entry_point
 
-sys.exit(main())
+sys.exit(entry_point())

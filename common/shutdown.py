@@ -28,6 +28,15 @@ def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
     return stop
 
 
+def ignore_stop_signals() -> None:
+    """SIGINT and SIGTERM ignored from here on: for a command whose work is done, on its way
+    out. Python sets its own handlers back to the default while the interpreter shuts down
+    (imported libraries take a tenth of a second to unload), and a stop arriving then would
+    kill the process, status 143 in place of its own; an ignored signal stays ignored."""
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, signal.SIG_IGN)
+
+
 @contextlib.contextmanager
 def terminate_as_interrupt():
     """Within the block, SIGTERM raises KeyboardInterrupt as SIGINT does, so a command ends

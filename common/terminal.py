@@ -56,4 +56,8 @@ def interruptible(main: Callable[[], int], name: str) -> int:
 def exit_with(main: Callable[[], int]) -> NoReturn:
     """Run a command's ``main`` (see ``interruptible``) and exit with its status: what a module
     run with ``python -m`` does under ``if __name__ == "__main__"``."""
-    sys.exit(interruptible(main, Path(sys.argv[0]).stem))
+    from balltrack.common.shutdown import ignore_stop_signals
+
+    status = interruptible(main, Path(sys.argv[0]).stem)
+    ignore_stop_signals()  # (done: a late stop must not replace the status)
+    sys.exit(status)

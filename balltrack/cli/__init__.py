@@ -70,6 +70,16 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
+def entry_point() -> int:
+    """The ``balltrack`` command (``python -m balltrack``): ``main``'s status, with SIGINT and
+    SIGTERM ignored once it is known (see ``shutdown.ignore_stop_signals``)."""
+    from balltrack.common.shutdown import ignore_stop_signals
+
+    status = main()
+    ignore_stop_signals()
+    return status
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] in DELEGATED:

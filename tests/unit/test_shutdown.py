@@ -1,6 +1,7 @@
 """SIGINT/SIGTERM set the one stop event without ever blocking the thread they interrupt."""
 
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -56,3 +57,30 @@ def test_an_interrupt_that_python_swallows_is_raised_again_in_the_block():
                 time.sleep(0.01)
     assert sys.unraisablehook is before
     assert signal.getsignal(signal.SIGALRM) is alarm_before
+
+
+LATE_STOP = """
+import os, signal, sys, time
+from balltrack.common.shutdown import ignore_stop_signals, stop_on_signals
+
+stop = stop_on_signals()
+
+
+class Late:
+    def __del__(self):  # (run as the interpreter clears its modules: Python's handlers are gone)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)
+
+
+late = Late()
+if sys.argv[1] == "ignore":
+    ignore_stop_signals()
+sys.exit(3)
+"""
+
+
+@pytest.mark.parametrize("ignoring, status", [("ignore", 3), ("no", -signal.SIGTERM)])
+def test_a_stop_while_the_interpreter_shuts_down_keeps_the_status_once_ignored(ignoring, status):
+    # (balltrack detect, SIGTERM in the tenth of a second after its last image: status 143)
+    finished = subprocess.run([sys.executable, "-c", LATE_STOP, ignoring], capture_output=True, timeout=60)
+    assert finished.returncode == status, finished.stderr
