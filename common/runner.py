@@ -141,10 +141,13 @@ def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Calla
                 raise ConfigError(f"--config {item}: expected SERVICE=FILE, SERVICE one of {', '.join(names)}")
             files[service] = path
         overrides = settings_by_service(args.overrides, names, f"this process's {', '.join(names)}")
-        configs = [load_config(config_class, files.get(name), overrides[name], section=name)
-                   for name, config_class, _ in services]
-        for config in configs:
-            preflight(config)
+        configs = []
+        for name, config_class, _ in services:
+            try:  # (which of the joined services a bad setting or file is for)
+                configs.append(load_config(config_class, files.get(name), overrides[name], section=name))
+                preflight(configs[-1])
+            except ConfigError as error:
+                raise ConfigError(f"{name}: {error}") from None
         Keys(args.namespace)
     except (ConfigError, ValueError) as error:
         print(f"{label}: {error}", file=sys.stderr)

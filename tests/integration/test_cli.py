@@ -148,7 +148,7 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["hz", "detected_ball", "--secure", "no-profile", "--role", "viewer"], "--secure: no no-profile/viewer/client.json5"),
     (["run", "detector+locator", "--set", "v_min=3"], "expected SERVICE.KEY=VALUE"),
     (["run", "detector+locator", "--set", "follower.keep_target=false"], "follower is not among this process's detector, locator"),
-    (["run", "detector+locator", "--set", "locator.bogus=1"], "bogus: unknown parameter"),
+    (["run", "detector+locator", "--set", "locator.bogus=1"], "detector+locator: locator: bogus: unknown parameter"),
     (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
     (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
     (["run", "detector", "--config", "."], "detector: .: cannot read the config file (Is a directory)"),
