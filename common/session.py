@@ -108,11 +108,17 @@ def _insert(config, key: str, value, option: str | None = None) -> None:
     option it came from), so that a typo is one line, not a traceback."""
     import zenoh
 
+    shown = ", ".join(map(str, value)) if isinstance(value, list) else value
     try:
         config.insert_json5(key, json.dumps(value))
     except zenoh.ZError as error:
-        shown = ", ".join(map(str, value)) if isinstance(value, list) else value
         raise ZenohConfigError(f"{option or key} {shown}: {zenoh_reason(error)}") from None
+    if key.endswith("/endpoints"):
+        # (Zenoh takes tcp/HOST:99999 here and fails only when it listens or dials)
+        for endpoint in value:
+            port = re.fullmatch(r"[a-z]+/.*:(\d+)", str(endpoint).split("#", 1)[0].split("?", 1)[0])
+            if port and int(port.group(1)) > 65535:
+                raise ZenohConfigError(f"{option or key} {shown}: port {port.group(1)} is past 65535")
 
 
 def _common_settings(config) -> None:

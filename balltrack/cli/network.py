@@ -78,7 +78,7 @@ def _run_folder_status(args) -> int:
         return 0 if result["supervisor"].get("running") else 1
     supervisor = result["supervisor"]
     if "error" in result:
-        print(f"{run_dir}: {result['error']}")
+        print(f"{run_dir}: {result['error']}", file=sys.stderr)
         return 1
     state = "running" if supervisor["running"] else f"not running ({supervisor.get('state')})"
     print(f"supervisor pid {supervisor.get('pid')} {state}; run folder {run_dir}")
