@@ -24,7 +24,8 @@ Rules:
   ``stable_after`` seconds; ``give_up_after`` quick failures in a row mark it ``failed``.
 * SIGINT or SIGTERM to the supervisor stops everything: SIGTERM to the services (in reverse
   order), then to the router, each given ``stop_timeout`` seconds before SIGKILL. The
-  supervisor exits 0 when every child exited 0, 1 otherwise; pid files are removed.
+  supervisor exits 0 when every child exited 0 or was killed by that SIGTERM (a child still
+  starting has no handler yet), 1 otherwise; pid files are removed.
 * Children run in their own session (a Ctrl-C in a terminal reaches the supervisor only, which
   then stops them in order) and get SIGTERM from the kernel if the supervisor itself dies.
 """
@@ -344,7 +345,9 @@ class Supervisor:
                 returncode = child.wait_stopped(deadline)
                 if was_running:
                     LOG.info("%s stopped (%s)", child.spec.name, describe_exit(returncode))
-                    clean = clean and returncode == 0
+                    # (killed by our own SIGTERM: it stopped as asked, before its handler was
+                    # installed, as a service still starting up does)
+                    clean = clean and returncode in (0, -signal.SIGTERM)
                 elif child.state == BACKOFF:
                     child.state = STOPPED
         return clean

@@ -22,6 +22,14 @@ def run_in_thread(supervisor: Supervisor) -> tuple[threading.Thread, dict]:
     return thread, result
 
 
+def wait_ready(run_dir, name: str) -> None:
+    """Until the child ``name`` has printed 'ready' (a line of its own: the log's header line
+    holds the command, 'ready' included)."""
+    log = run_dir / f"{name}.log"
+    wait_until(lambda: "ready" in log.read_text().splitlines() if log.exists() else False, 20,
+               f"{name} to start")
+
+
 def status(run_dir) -> dict:
     try:
         return json.loads((run_dir / "status.json").read_text())
@@ -56,9 +64,7 @@ def test_stop_terminates_and_kills_what_ignores_sigterm(tmp_path):
     supervisor = Supervisor(tmp_path, [child("polite", polite), child("stubborn", stubborn)], FAST)
     thread, result = run_in_thread(supervisor)
     for name in ("polite", "stubborn"):
-        # A line of its own: the log's header line holds the command, 'ready' included.
-        wait_until(lambda: "ready" in (tmp_path / f"{name}.log").read_text().splitlines()
-                 if (tmp_path / f"{name}.log").exists() else False, 20, f"{name} to start")
+        wait_ready(tmp_path, name)
     assert (tmp_path / "stubborn.pid").exists() and (tmp_path / "supervisor.pid").exists()
     supervisor.stop.set()
     thread.join(20)
@@ -69,3 +75,16 @@ def test_stop_terminates_and_kills_what_ignores_sigterm(tmp_path):
     assert all(item["state"] == "stopped" for item in children.values())
     assert status(tmp_path)["supervisor"]["state"] == "stopped"
     assert not list(tmp_path.glob("*.pid"))
+
+
+def test_a_child_that_the_stop_kills_before_it_handles_sigterm_has_stopped_cleanly(tmp_path):
+    # (a service SIGTERMed while still importing: the default action, status -15; the supervisor
+    # exited 1 for a stop that went as asked)
+    supervisor = Supervisor(tmp_path, [child("starting", "import time; print('ready', flush=True); time.sleep(60)")], FAST)
+    thread, result = run_in_thread(supervisor)
+    wait_ready(tmp_path, "starting")
+    supervisor.stop.set()
+    thread.join(20)
+    assert not thread.is_alive()
+    assert result["code"] == 0
+    assert status(tmp_path)["children"]["starting"]["last_exit"] == -15
