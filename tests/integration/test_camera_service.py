@@ -155,7 +155,8 @@ def test_a_refused_source_stops_a_process_of_several_services_whichever_loop_it_
 @pytest.mark.parametrize("name, overrides, expected", [
     ("camera", ("source=/nonexistent/clip.mp4",), "camera: source: no such file, folder, device or URL"),
     ("camera", ("calibration=/nonexistent.yaml",), "camera: /nonexistent.yaml: cannot read"),
-    ("camera+detector", ("camera.source=/nonexistent/clip.mp4",), "camera+detector: source: no such file"),
+    # (of several services, which one it is for)
+    ("camera+detector", ("camera.source=/nonexistent/clip.mp4",), "camera+detector: camera: source: no such file"),
 ])
 def test_a_missing_file_exits_2_before_a_router_answers(tmp_path, name, overrides, expected):
     # Nobody listens there: a service waits for its router, but not to report a typo in a path.
