@@ -26,6 +26,7 @@ from balltrack.cli import (calibrate, config, introspect, network, offline, publ
                            topics)
 from balltrack.cli import secure
 from balltrack.cli import view
+from balltrack.cli.session import check_keys
 from balltrack.common.keys import Keys
 from balltrack.common.session import client_config, secure_client_path
 from balltrack.common.arguments import ArgumentParser
@@ -94,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
                 client_config(getattr(args, "connect", None), getattr(args, "zenoh_config", None))
             if getattr(args, "secure", None) and hasattr(args, "role"):
                 secure_client_path(args.secure, args.role)  # (the profile holds this command's role)
+            # (the key a command watches or publishes, or the keys it records)
+            check_keys([args.key] if getattr(args, "key", None) else list(getattr(args, "keys", None) or []),
+                       args.namespace)
         except ValueError as error:
             print(f"balltrack {args.command}: {error}", file=sys.stderr)
             return 2

@@ -22,8 +22,7 @@ from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.arguments import number, unwritable_reason
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
-from balltrack.common.keys import Keys
-from balltrack.common.session import peer_conflict, zenoh_reason
+from balltrack.common.session import peer_conflict
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics, wait_routed
 
@@ -55,18 +54,6 @@ def _when(nanoseconds: int | None) -> str:
     return f"{moment:%Y-%m-%d %H:%M:%S.%f}"[:-3] + f" ({nanoseconds / 1e9:.3f})"
 
 
-def refused_key(keys: list[str], namespace: str) -> str | None:
-    """Why Zenoh refuses one of ``keys`` as a key expression (namespaced), or None."""
-    import zenoh
-
-    for key in keys:
-        try:
-            zenoh.KeyExpr(Keys(namespace)(key))
-        except zenoh.ZError as error:
-            return f"{key!r}: not a key expression ({zenoh_reason(error)})"
-    return None
-
-
 def command_record(args) -> int:
     if not 0 <= args.hold <= 10:
         return _fail(args, "--hold: must be 0 to 10 seconds", 2)
@@ -78,9 +65,6 @@ def command_record(args) -> int:
     unwritable = unwritable_reason(args.output)
     if unwritable:  # (before waiting for a router, which may take long or never answer)
         return _fail(args, f"cannot write {args.output}: {unwritable}", 2)
-    refused = refused_key(args.keys or [], args.namespace)
-    if refused:  # (the same: and before the output file is made, which would be left empty)
-        return _fail(args, refused, 2)
     if args.nice:
         os.nice(args.nice)  # before the session: threads take the priority of their creator
     keep_freed_memory()  # (frames come and go at 30 a second)

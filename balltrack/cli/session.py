@@ -4,8 +4,9 @@ import os
 import sys
 
 from balltrack.common.arguments import number
+from balltrack.common.keys import Keys
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
-                                      open_from_args, open_until_stopped)
+                                      open_from_args, open_until_stopped, zenoh_reason)
 
 
 def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0, peer: bool = False):
@@ -16,6 +17,19 @@ def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0
                      help=f"seconds to wait for a router and for answers (default {timeout:g})")
     sub.set_defaults(handler=handler)
     return sub
+
+
+def check_keys(keys: list[str], namespace: str) -> None:
+    """ValueError naming the first of ``keys`` Zenoh refuses as a key expression (in
+    ``namespace``): said before a command waits for a router and subscribes (echo, hz, record:
+    a traceback, and record's empty file, after)."""
+    import zenoh
+
+    for key in keys:
+        try:
+            zenoh.KeyExpr(Keys(namespace)(key))
+        except zenoh.ZError as error:
+            raise ValueError(f"{key!r}: not a key expression ({zenoh_reason(error)})") from None
 
 
 def open_or_report(args, stop=None):

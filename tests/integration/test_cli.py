@@ -119,6 +119,8 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["record", "-o", "."], "cannot write .: Is a directory"),
     # (a key Zenoh refuses: said before a router is sought, and no empty recording left behind)
     (["record", "-o", "x.mcap", "bad**key//"], "'bad**key//': not a key expression (Invalid Key Expr"),
+    (["echo", "bad**key//"], "balltrack echo: 'bad**key//': not a key expression (Invalid Key Expr"),
+    (["hz", "camera//image_raw"], "balltrack hz: 'camera//image_raw': not a key expression"),
     (["play", "x.mcap", "--rate", "-1"], "--rate: must be at least 0"),
     (["play", "x.mcap", "--start", "inf"], "--start: must be a finite number"),
     (["pub", "detected_ball", "{}", "--rate", "inf"], "--rate: must be a finite number"),
