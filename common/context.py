@@ -153,14 +153,13 @@ class ServiceContext:
 
     def set_config(self, changes: dict) -> Any:
         new_config = replace_config(self._config, changes)
-        if getattr(new_config, "use_sim_time", None) != getattr(self._config, "use_sim_time", None):
-            raise ConfigError("use_sim_time: can only be set at start")
-        if self.live_settings is not None:
-            fixed = [name for name in vars(new_config) if name not in self.live_settings
-                     and getattr(new_config, name) != getattr(self._config, name)]
-            if fixed:
-                raise ConfigError(f"{', '.join(fixed)}: can only be set at start (live: "
-                                  f"{', '.join(sorted(self.live_settings))})")
+        # (use_sim_time never: the service's clock is chosen at start)
+        fixed = [name for name in vars(new_config)
+                 if (name == "use_sim_time" or self.live_settings is not None and name not in self.live_settings)
+                 and getattr(new_config, name) != getattr(self._config, name)]
+        if fixed:
+            live = "" if self.live_settings is None else f" (live: {', '.join(sorted(self.live_settings))})"
+            raise ConfigError(f"{', '.join(fixed)}: can only be set at start{live}")
         self._config = new_config
         for listener in self._config_listeners:
             listener(new_config)
