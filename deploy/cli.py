@@ -55,15 +55,16 @@ def endpoint_port(endpoint: str) -> int | None:
         return None
 
 
-def listen_host(listen: str) -> str:
-    """The address part of ``tcp/HOST:PORT``."""
-    return listen.partition("/")[2].split("#", 1)[0].rpartition(":")[0]
+def endpoint_parts(endpoint: str) -> tuple[str, str, str]:
+    """(protocol, host, port) of ``tcp/HOST:PORT#config``, as text ("" for a missing part)."""
+    protocol, _, address = endpoint.partition("/")
+    host, _, port = address.split("#", 1)[0].rpartition(":")
+    return protocol, host, port
 
 
 def local_endpoint(listen: str) -> str:
     """Where a process on the same host reaches a router listening on ``listen``."""
-    protocol, _, address = listen.partition("/")
-    host, _, port = address.split("#", 1)[0].rpartition(":")
+    protocol, host, port = endpoint_parts(listen)
     if host in ("0.0.0.0", "", "[::]", "*"):
         host = "127.0.0.1"
     return f"{protocol}/{host}:{port}"
@@ -161,7 +162,7 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             raise LaunchError("--listen: give a port (0 would be chosen by the router, unknown to the services)")
         # (else the services would find and join whatever holds the port, while our router
         # fails to listen and is restarted for ever)
-        if port is not None and port_taken(port, listen_host(listen[0])):
+        if port is not None and port_taken(port, endpoint_parts(listen[0])[1]):
             raise LaunchError(f"--listen {listen[0]}: port {port} is in use (another router? stop it, "
                               "or give --listen another port)")
         specs.append(ChildSpec("router", argv, port=port))

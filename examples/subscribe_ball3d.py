@@ -52,7 +52,8 @@ def printed(line: str) -> bool:
 
 def zenoh_reason(error: Exception) -> str:
     """The first line of a Zenoh error, without the Rust source location it ends with or the
-    wrapping of a configuration error (``Json5Err(Message { msg: "...``)."""
+    wrapping of a configuration error (``Json5Err(Message { msg: "...``). A short cousin of
+    ``balltrack.common.session.zenoh_reason``: this file imports only zenoh and msgpack."""
     line = (str(error).strip().splitlines() or [repr(error)])[0].split(" at /")[0]
     return line.split('msg: "', 1)[-1].rstrip('"')
 
