@@ -14,7 +14,7 @@ import pytest
 
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode
-from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, client, draw_ball, floor_image,
+from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, client, draw_ball, floor_image, free_port,
                            process_environment, start_service)
 from tests.integration.test_pipeline import CAMERA_INFO
 
@@ -156,9 +156,6 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
     (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
     (["run", "detector", "--config", "."], "detector: .: cannot read the config file (Is a directory)"),
-    # (a scenario that is not there: said at once, not after 30 s of waiting for a router)
-    (["run", "simulator", "--set", "scenario=nosuch", "--connect", "tcp/127.0.0.1:9"],
-     "nosuch.toml: no such scenario file (shipped scenarios: chase,"),
     (["deploy", "start", "--services", "detector+locator,locator"], "a service may run once"),
     (["deploy", "start", "--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])
@@ -166,6 +163,14 @@ def test_bad_arguments_give_one_line_and_status_2(arguments, reason):
     result = balltrack(*arguments)
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1 and reason in result.stderr, result.stderr
+
+
+def test_a_scenario_that_is_not_there_is_refused_before_a_router_answers():
+    # (nothing listens on that port: it used to wait 30 s for a router, then exit 1)
+    result = balltrack("run", "simulator", "--set", "scenario=nosuch", "--connect", f"tcp/127.0.0.1:{free_port()}")
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "nosuch.toml: no such scenario file (shipped scenarios: chase," in result.stderr
 
 
 def test_fit_colour_writes_a_parameter_file_the_detector_reads(tmp_path):
@@ -235,8 +240,8 @@ def test_no_router_is_a_clear_error():
 
 @pytest.mark.parametrize("command", [["echo", "detected_ball"], ["topic", "list"]])
 def test_a_command_still_waiting_for_its_router_stops_at_once_on_sigterm(log_dir, command):
-    # (nothing listens on port 9: the command waits for its router up to --timeout, 60 s)
-    process = Process([sys.executable, "-m", "balltrack", *command, "--connect", "tcp/127.0.0.1:9",
+    # (nothing listens on that port: the command waits for its router up to --timeout, 60 s)
+    process = Process([sys.executable, "-m", "balltrack", *command, "--connect", f"tcp/127.0.0.1:{free_port()}",
                        "--timeout", "60"], log_dir / "command.log")
     process.wait_for_signal_handler(signal.SIGTERM, 30)
     process.popen.terminate()
