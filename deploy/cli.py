@@ -82,6 +82,10 @@ def parse_service_overrides(items: list[str], services: list[str]) -> dict[str, 
 def build_specs(args) -> tuple[list[ChildSpec], dict]:
     """The children (router first) and the facts ``status`` needs, from ``start``'s options."""
     services = [name.strip() for name in args.services.split(",") if name.strip()]
+    if not services:
+        # (an empty shell variable, most likely: a router alone is `balltrack router`)
+        raise LaunchError(f"--services: {args.services!r} names no service (known: {', '.join(SERVICES)}; "
+                          "a router alone: balltrack router)")
     names = services_of(services)
     unknown = [name for name in names if name not in SERVICES]
     if unknown:

@@ -7,6 +7,7 @@ is shown by that service's name. Rates are measured by listening for ``--window`
 """
 
 import json
+import sys
 import threading
 import time
 from collections import defaultdict
@@ -156,14 +157,21 @@ def command_topic_info(args) -> int:
     full_key = keys(args.key)
     samples = traffic.get(full_key, [])
     spec = next((spec for spec in key_table.TABLE if spec.key == args.key), None)
+    publishers = graph.who("publisher", full_key, keys) if graph.readable else None
+    subscribers = graph.who("subscriber", full_key, keys) if graph.readable else None
+    if spec is None and not samples and not publishers and not subscribers:
+        # (as `ros2 topic info` of an unknown topic: a key of the user's own apps shows once seen)
+        print(f"balltrack topic info: {args.key}: not a key of balltrack's table (balltrack topic list), "
+              f"and no publisher, subscriber or message of it seen in {args.window:g} s", file=sys.stderr)
+        return 1
     sizes = [size for _, size in samples]
     info = {
         "key": full_key,
         "type": _message_type(keys, full_key),
         "declared_publisher": spec.publisher if spec else None,
         "when": spec.when if spec else None,
-        "publishers": graph.who("publisher", full_key, keys) if graph.readable else None,
-        "subscribers": graph.who("subscriber", full_key, keys) if graph.readable else None,
+        "publishers": publishers,
+        "subscribers": subscribers,
         "rate_hz": round(rate(samples), 3),
         "messages_seen": len(samples),
         "mean_bytes": round(sum(sizes) / len(sizes), 1) if sizes else None,

@@ -142,11 +142,14 @@ def _argument_value(text: str):
 
 def command_sim(args) -> int:
     from balltrack.services.simulator.control import send_command
+    from balltrack.services.simulator.requests import checked_form
 
     try:
         request = {"op": args.op, **{key: _argument_value(value)
                                      for key, value in parse_overrides(args.arguments).items()}}
-    except ConfigError as error:
+        # (what the simulator would refuse whatever its world is: refused here, as a bad argument)
+        checked_form(request)
+    except (ConfigError, ValueError) as error:
         print(f"balltrack sim: {error}", file=sys.stderr)
         return 2
     session = open_or_report(args)

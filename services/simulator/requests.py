@@ -54,6 +54,38 @@ def checked_request(request: Any) -> tuple[str, dict[str, Any]]:
     return op, arguments
 
 
+def checked_form(request: Any) -> tuple[str, dict[str, Any]]:
+    """``checked_request``, and each argument's form as far as it does not depend on the world
+    (types, light levels, the length of a position, required arguments): what a client can
+    refuse before it sends the request. The simulator checks again, against its world."""
+    op, arguments = checked_request(request)
+    if op == "reset":
+        scenario_name(arguments.get("scenario"))
+    elif op == "set_light":
+        if arguments.get("diffuse") is None and arguments.get("ambient") is None:
+            raise ValueError("set_light: give diffuse and/or ambient")
+        for name in ("diffuse", "ambient"):
+            if arguments.get(name) is not None:
+                light_level(name, arguments[name])
+    elif op == "place_ball":
+        if arguments.get("id") is None:
+            raise ValueError("place_ball: missing 'id'")
+        position_values(arguments.get("position"))
+    else:
+        robot_position(arguments.get("x"), arguments.get("y"), math.inf)
+        if arguments.get("yaw") is not None:
+            finite_number("yaw", arguments["yaw"])
+    return op, arguments
+
+
+def scenario_name(scenario: Any) -> str | None:
+    """A reset's scenario name (None: the current scenario); ValueError for an empty or
+    non-string one."""
+    if scenario is not None and (not isinstance(scenario, str) or not scenario.strip()):
+        raise ValueError(f"scenario: expected a scenario name, got {scenario!r}")
+    return scenario
+
+
 def ball_index(ball_id: Any, ids: list[str]) -> int:
     """Which of the scenario's balls ``ball_id`` names; ValueError listing them otherwise."""
     if ball_id is None:
@@ -65,9 +97,7 @@ def ball_index(ball_id: Any, ids: list[str]) -> int:
 
 def ball_position(position: Any, radius: float, half_size: float) -> tuple[float, float, float]:
     """A ball's new centre from [x, y] (resting on the floor) or [x, y, z], inside the world."""
-    if not isinstance(position, (list, tuple)) or len(position) not in (2, 3):
-        raise ValueError(f"position: expected [x, y] or [x, y, z], got {position!r}")
-    values = [finite_number(f"position[{axis}]", value) for axis, value in enumerate(position)]
+    values = position_values(position)
     limit = half_size - radius
     if abs(values[0]) > limit or abs(values[1]) > limit:
         raise ValueError(f"position: ({values[0]:g}, {values[1]:g}) is outside the world "
@@ -77,6 +107,13 @@ def ball_position(position: Any, radius: float, half_size: float) -> tuple[float
     if not 0.0 <= values[2] <= MAX_BALL_HEIGHT:
         raise ValueError(f"position: z must be between 0 and {MAX_BALL_HEIGHT:g} m, got {values[2]:g}")
     return values[0], values[1], values[2]
+
+
+def position_values(position: Any) -> list[float]:
+    """[x, y] or [x, y, z] as floats; ValueError for any other form."""
+    if not isinstance(position, (list, tuple)) or len(position) not in (2, 3):
+        raise ValueError(f"position: expected [x, y] or [x, y, z], got {position!r}")
+    return [finite_number(f"position[{axis}]", value) for axis, value in enumerate(position)]
 
 
 def robot_position(x: Any, y: Any, limit: float) -> tuple[float, float]:

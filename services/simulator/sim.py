@@ -46,10 +46,11 @@ from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
 from balltrack.services.simulator.requests import (  # noqa: E402
     ball_index,
     ball_position,
-    checked_request,
+    checked_form,
     finite_number,
     light_level,
     robot_position,
+    scenario_name,
 )
 from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
 from balltrack.services.simulator.sim_camera import SimCamera, camera_info, project  # noqa: E402
@@ -334,7 +335,7 @@ class Simulation:
         scenario) changes nothing: every argument is validated before anything is applied.
         """
         try:
-            op, arguments = checked_request(request)
+            op, arguments = checked_form(request)
             getattr(self, op)(**arguments)
         except (ValueError, TypeError, KeyError) as error:
             return {"ok": False, "error": str(error)}
@@ -346,9 +347,7 @@ class Simulation:
 
         Light changes, placed balls and robot moves are undone; the command is cleared.
         """
-        if scenario is not None:
-            if not isinstance(scenario, str) or not scenario.strip():
-                raise ValueError(f"scenario: expected a scenario name, got {scenario!r}")
+        if scenario_name(scenario) is not None:
             loaded = load_scenario(scenario)  # ConfigError (a ValueError) if bad: nothing changed
             self._load(loaded, self._data.time)
             # (the old world's model, data and renderer, freed amid the heap, would stay resident)

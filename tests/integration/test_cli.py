@@ -143,6 +143,10 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
+    # (refused before any router is asked: nothing listens at the default endpoint here)
+    (["sim", "set_light", "diffuse=bright"], "balltrack sim: diffuse: expected a number, got 'bright'"),
+    (["sim", "place_robot", "x=1"], "balltrack sim: place_robot: 'x' and 'y' are required"),
+    (["deploy", "start", "--services", ""], "deploy start: --services: '' names no service"),
     (["run", "detector+bogus"], "expected SERVICE or SERVICE+SERVICE"),
     (["run", "detector+detector"], "each once"),
     (["run", "detector+locator", "--secure", "secure"], "--secure: a secure setup gives each service"),

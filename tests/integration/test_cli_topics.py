@@ -67,6 +67,20 @@ def test_topic_info_describes_one_key(router, locator, camera_info_stream):
     assert info["messages_seen"] > 5 and info["mean_bytes"] > 50
 
 
+def test_topic_info_of_a_key_no_one_uses_is_an_error_and_of_a_users_own_key_is_not(router, session):
+    unknown = balltrack("topic", "info", "myapp/status", "--connect", router.endpoint, "--window", "0.5")
+    assert unknown.returncode == 1 and unknown.stdout == ""
+    assert unknown.stderr.strip() == ("balltrack topic info: myapp/status: not a key of balltrack's table "
+                                      "(balltrack topic list), and no publisher, subscriber or message of it seen in 0.5 s")
+    subscriber = session.declare_subscriber("myapp/status", lambda sample: None)
+    try:
+        shown = balltrack("topic", "info", "myapp/status", "--connect", router.endpoint, "--window", "0.5")
+    finally:
+        subscriber.undeclare()
+    assert shown.returncode == 0, shown.stderr
+    assert json.loads(shown.stdout)["type"] == "-"
+
+
 def test_pub_validates_then_publishes_once_or_at_a_rate(router, session):
     received = Collector(session, "cmd_vel", "Twist")
     once = balltrack("pub", "cmd_vel", "{linear: [0.1, 0, 0], angular: [0, 0, 0.5]}",

@@ -57,6 +57,7 @@ def test_without_router_services_use_the_given_endpoint_or_the_zenoh_file(tmp_pa
 
 @pytest.mark.parametrize("arguments, message", [
     (["--services", "detector,nosuch"], "unknown nosuch"),
+    (["--services", " , "], "names no service"),
     (["--set", "rate_hz=3"], "SERVICE.KEY=VALUE"),
     (["--services", "detector", "--set", "follower.rate_hz=3"], "not among --services"),
     (["--listen", "tcp/0.0.0.0:7447"], "need --router"),

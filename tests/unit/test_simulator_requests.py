@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from balltrack.services.simulator.requests import (COMMAND_OPS, ball_index, ball_position, checked_request,
-                                                   light_level, robot_position)
+from balltrack.services.simulator.requests import (COMMAND_OPS, ball_index, ball_position, checked_form,
+                                                   checked_request, light_level, robot_position)
 
 ANY_VALUE = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8),
                          lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
@@ -34,6 +34,42 @@ def test_any_request_is_checked_or_refused_with_a_reason(request):
 def test_bad_requests_name_what_is_wrong(request_, reason):
     with pytest.raises(ValueError, match="^" + reason.replace("(", r"\(").replace(")", r"\)") + "$"):
         checked_request(request_)
+
+
+@given(ANY_VALUE)
+def test_a_request_whose_form_passes_passes_the_request_check(request):
+    # (checked_form is what `balltrack sim` refuses before sending: never looser than the simulator's first check)
+    try:
+        checked_form(request)
+    except ValueError as error:
+        assert str(error)
+        return
+    checked_request(request)
+
+
+@pytest.mark.parametrize("request_, reason", [
+    ({"op": "set_light"}, "set_light: give diffuse and/or ambient"),
+    ({"op": "set_light", "ambient": "abc"}, "ambient: expected a number, got 'abc'"),
+    ({"op": "set_light", "diffuse": 2}, "diffuse: values must be between 0 and 1, got [2.0, 2.0, 2.0]"),
+    ({"op": "place_ball", "position": [1, 2]}, "place_ball: missing 'id'"),
+    ({"op": "place_ball", "id": "tennis", "position": 1}, "position: expected [x, y] or [x, y, z], got 1"),
+    ({"op": "place_robot", "x": 1}, "place_robot: 'x' and 'y' are required"),
+    ({"op": "place_robot", "x": 1, "y": 2, "yaw": "q"}, "yaw: expected a number, got 'q'"),
+    ({"op": "reset", "scenario": ""}, "scenario: expected a scenario name, got ''"),
+])
+def test_the_form_of_arguments_is_checked_without_a_world(request_, reason):
+    with pytest.raises(ValueError) as raised:
+        checked_form(request_)
+    assert str(raised.value) == reason
+
+
+@pytest.mark.parametrize("request_", [
+    {"op": "reset"}, {"op": "reset", "scenario": "search"}, {"op": "set_light", "ambient": [0.1, 0.2, 0.3]},
+    # (whether the ball exists and the place is inside the world, only the simulator knows)
+    {"op": "place_ball", "id": "nosuch", "position": [99, 0]}, {"op": "place_robot", "x": 99, "y": 0, "yaw": 1},
+])
+def test_arguments_of_a_good_form_pass(request_):
+    assert checked_form(request_) == checked_request(request_)
 
 
 def test_good_request_keeps_its_arguments():
