@@ -16,10 +16,23 @@ from typing import Callable
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse with a one-line error (the reason, not the usage block) and exit status 2."""
+    """argparse with a one-line error (the reason, not the usage block) and exit status 2; an
+    option no (sub)command knows is reported by the subcommand given (``balltrack info:
+    unrecognized arguments: --bogus``), not by the top-level command."""
+
+    def __init__(self, *arguments, **options):
+        super().__init__(*arguments, **options)
+        # (a subcommand's defaults overwrite its parent's: the innermost one given is named)
+        self.set_defaults(parser_of_command=self)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: {message}\n")
+
+    def parse_args(self, args=None, namespace=None):
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            getattr(parsed, "parser_of_command", self).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
 
 
 def number(minimum: float | None = None, above: float | None = None) -> Callable[[str], float]:

@@ -188,7 +188,8 @@ def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> lis
     """The recorded topics to play: all, or those whose topic or key (without the recorded
     namespace) is in ``wanted``: balltrack's msgpack channels only (the Foxglove ones are for
     viewing). ValueError names a wanted key the recording lacks."""
-    channels = [channel for channel in recording.channels() if channel.message_encoding == MESSAGE_ENCODING]
+    every = recording.channels()
+    channels = [channel for channel in every if channel.message_encoding == MESSAGE_ENCODING]
     if not wanted:
         return [channel.topic for channel in channels]
     chosen = []
@@ -196,6 +197,10 @@ def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> lis
         matches = [channel.topic for channel in channels if name in (channel.topic, channel.key)]
         if not matches:
             recorded = ", ".join(channel.topic for channel in channels) or "none"
+            if any(channel.topic == name for channel in every):
+                # (`balltrack info` lists both kinds)
+                raise ValueError(f"{name!r} is a Foxglove channel of the recording, for viewing: play "
+                                 f"publishes balltrack's keys (recorded: {recorded})")
             raise ValueError(f"{name!r} is not in the recording (recorded: {recorded})")
         chosen.extend(match for match in matches if match not in chosen)
     return chosen

@@ -86,18 +86,22 @@ def main(argv: list[str] | None = None) -> int:
     if argv and argv[0] in DELEGATED:
         return DELEGATED[argv[0]][1](argv[1:])
     args = build_parser().parse_args(argv)
-    if getattr(args, "namespace", None) is not None:
+    # (every networked command has a namespace; play's is None unless given: see recording.py)
+    if hasattr(args, "namespace"):
         try:
-            Keys(args.namespace)
+            if args.namespace is not None:
+                Keys(args.namespace)
             if args.command != "router":  # (the router builds a router's config, see network.py)
                 # Zenoh refuses a bad --connect endpoint or --zenoh-config file when the
                 # config is built: a bad argument, said before the command starts its work.
                 client_config(getattr(args, "connect", None), getattr(args, "zenoh_config", None))
             if getattr(args, "secure", None) and hasattr(args, "role"):
                 secure_client_path(args.secure, args.role)  # (the profile holds this command's role)
-            # (the key a command watches or publishes, or the keys it records)
-            check_keys([args.key] if getattr(args, "key", None) else list(getattr(args, "keys", None) or []),
-                       args.namespace)
+            # (the key a command watches or publishes, or the keys it records; play's keys are
+            # the recording's, checked against it)
+            if args.namespace is not None:
+                check_keys([args.key] if getattr(args, "key", None) else list(getattr(args, "keys", None) or []),
+                           args.namespace)
         except ValueError as error:
             print(f"balltrack {args.command}: {error}", file=sys.stderr)
             return 2

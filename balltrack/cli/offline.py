@@ -95,6 +95,12 @@ def command_fit_colour(args) -> int:
             image = read_image(path)
         except UnreadableImage as error:
             return fail(f"{path}: cannot read image ({error})")
+        height, width = image.shape[:2]
+        for box in marked:
+            # (a ball's centre outside the image: a box of another image, or x and y swapped)
+            if not (0 <= box["x"] + box["w"] / 2 < width and 0 <= box["y"] + box["h"] / 2 < height):
+                return fail(f"{path}: the box {box['x']:g},{box['y']:g},{box['w']:g},{box['h']:g} has its "
+                            f"centre outside the {width}x{height} image")
         samples.append(colour_samples(image, counted_balls(marked, min_ball_px=0), config))
     try:
         fit = fit_colour(ColourSamples.joined(samples), config)

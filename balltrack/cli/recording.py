@@ -50,8 +50,10 @@ def _size(size: float) -> str:
 def _when(nanoseconds: int | None) -> str:
     if nanoseconds is None:
         return "-"
-    moment = datetime.fromtimestamp(nanoseconds / 1e9, timezone.utc).astimezone()
-    return f"{moment:%Y-%m-%d %H:%M:%S.%f}"[:-3] + f" ({nanoseconds / 1e9:.3f})"
+    # (both to the millisecond below: the clock time and the seconds agree to the digit)
+    milliseconds = nanoseconds // 1_000_000
+    moment = datetime.fromtimestamp(milliseconds / 1e3, timezone.utc).astimezone()
+    return f"{moment:%Y-%m-%d %H:%M:%S}.{milliseconds % 1000:03d} ({milliseconds // 1000}.{milliseconds % 1000:03d})"
 
 
 def command_record(args) -> int:
@@ -120,10 +122,14 @@ def command_play(args) -> int:
     with recording:
         try:
             topics = select_topics(recording, args.keys) if args.keys else None
+            duration = recording.summary(rates=False).duration
         except ValueError as error:
             return _fail(args, str(error), 2)
         except RecordingError as error:
             return _fail(args, str(error), 2)
+        if args.start > duration:
+            return _fail(args, f"--start {args.start:g} s is past the recording's end ({duration:.3f} s "
+                               "after its first message): nothing to play", 2)
         stop = stop_on_signals()
         session = open_or_report(args, stop)
         if session is None:

@@ -1,6 +1,6 @@
 """Watching the system live:
 
-    balltrack view [--port 9090]              # Rerun's web viewer at http://HOST:PORT
+    balltrack view [--port 9090]              # Rerun's web viewer: open the address it prints
     balltrack view --foxglove [--port 8765]   # a Foxglove WebSocket server (ws://HOST:PORT)
 
 Rerun shows the annotated frame, the true balls and the robot's path in the world frame, and
@@ -11,6 +11,7 @@ detector's annotated frame), /scene (located and true balls), /tf (world -> base
 """
 
 import sys
+import urllib.parse
 
 from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.shutdown import stop_on_signals
@@ -36,12 +37,21 @@ def _serve_rerun(args, session, stop) -> int:
                            f"{str(error).strip().splitlines()[0]}", 1)
     bridge = RerunBridge(session, recording, args.namespace)
     # (Rerun's Python API binds every interface, and serves without a password)
-    print(f"balltrack view: Rerun viewer on http://127.0.0.1:{args.port} (data: {server}; served on every "
-          "interface, to anyone who reaches these ports; Ctrl-C to stop)", file=sys.stderr, flush=True)
+    print(f"balltrack view: Rerun viewer on {viewer_url(args.port, server)} (served on every interface, "
+          "to anyone who reaches these ports; from another host, its address in place of both "
+          "127.0.0.1; Ctrl-C to stop)", file=sys.stderr, flush=True)
     stop.wait()
     bridge.close()
     recording.disconnect()
     return _report(bridge)
+
+
+def viewer_url(web_port: int, data_url: str) -> str:
+    """The address of Rerun's web page that opens with its data: the page's own address
+    shows only Rerun's welcome screen (its ``connect_to`` is not passed on to a browser opened
+    by hand), so the data's address (``rerun+http://127.0.0.1:9876/proxy``) goes in its ``url``
+    query."""
+    return f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(data_url, safe=':/')}"
 
 
 def _serve_foxglove(args, session, stop) -> int:

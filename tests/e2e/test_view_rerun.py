@@ -5,6 +5,7 @@ the page shows the system's data, must not be blank and must show the ball's yel
 import asyncio
 import base64
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -132,7 +133,9 @@ def test_the_rerun_page_shows_the_running_system(tmp_path):
             profile.mkdir()
             browser = Chromium(profile, tmp_path / "chromium.log")
             try:
-                url = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+                # (the address the command prints, as a user opens it)
+                url = re.search(r"Rerun viewer on (\S+)", viewer.output()).group(1)
+                assert url == f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
                 image = asyncio.run(browser.screenshots(
                     url, lambda shot: ball_coloured_pixels(shot) >= BALL_PIXELS, timeout=300))
             finally:

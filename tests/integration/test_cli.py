@@ -195,6 +195,16 @@ def test_fit_colour_writes_a_parameter_file_the_detector_reads(tmp_path):
     assert balls == [(200, 300), (450, 200)]
 
 
+def test_fit_colour_refuses_a_box_whose_centre_is_outside_the_image(tmp_path):
+    photo = tmp_path / "floor.png"
+    cv2.imwrite(str(photo), floor_image())
+    height, width = floor_image().shape[:2]
+    result = balltrack("fit-colour", str(photo), "--box", f"{width},10,20,20")
+    assert result.returncode == 2
+    assert result.stderr.strip() == (f"balltrack fit-colour: {photo}: the box {width},10,20,20 has its centre "
+                                     f"outside the {width}x{height} image")
+
+
 @pytest.mark.parametrize("content", [b"", b"not an image\n"])
 def test_fit_colour_rejects_a_file_that_is_no_image(tmp_path, content):
     (tmp_path / "bad.png").write_bytes(content)

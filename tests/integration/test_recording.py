@@ -188,6 +188,11 @@ def test_play_keys_start_and_namespace(router, session, tmp_path):
     missing = balltrack("play", str(path), "--keys", "cmd_vel", "--connect", router.endpoint)
     assert missing.returncode == 2 and "cmd_vel" in missing.stderr
     assert len(missing.stderr.strip().splitlines()) == 1
+    # (the recording's messages are 1 s apart, the last 11 s after the first)
+    late = balltrack("play", str(path), "--start", "11.5", "--connect", router.endpoint)
+    assert late.returncode == 2 and late.stdout == ""
+    assert late.stderr.strip() == ("balltrack play: --start 11.5 s is past the recording's end (11.000 s after "
+                                   "its first message): nothing to play")
 
 
 def test_play_loop_repeats_until_stopped(router, session, tmp_path):
@@ -210,6 +215,9 @@ def test_bad_files_and_arguments_are_one_line_and_exit_2(router, tmp_path):
              ("play", str(tmp_path / "missing.mcap"), "--connect", router.endpoint),
              ("play", str(garbage), "--rate", "-1", "--connect", router.endpoint),
              ("play", str(garbage), "--rate", "fast"),
+             # (as record's: a bad endpoint or config file, said before the file is read)
+             ("play", str(garbage), "--connect", "localhost:7447"),
+             ("play", str(garbage), "--zenoh-config", str(tmp_path / "missing.json5")),
              ("record", "--connect", router.endpoint),  # no -o
              ("record", "-o", str(tmp_path / "x.mcap"), "--duration", "0"),
              ("record", "-o", str(tmp_path / "x.mcap"), "--hold", "-0.1"),

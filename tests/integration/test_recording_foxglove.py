@@ -93,7 +93,11 @@ def test_foxglove_channels_decode_independently_and_play_skips_them(router, sess
     assert decoded["/cmd_vel"] == [{"stamp": 1_000_000_004, "linear": [0.2, 0.0, 0.0],
                                     "angular": [0.0, 0.0, -0.5]}]
 
-    # play: the balltrack keys byte for byte, no Foxglove topic put on Zenoh
+    # play: the balltrack keys byte for byte, no Foxglove topic put on Zenoh; a Foxglove
+    # channel asked for by name is refused as one
+    refused = balltrack("play", str(path), "--keys", "/tf", "--connect", router.endpoint)
+    assert refused.returncode == 2
+    assert refused.stderr.startswith("balltrack play: '/tf' is a Foxglove channel of the recording, for viewing")
     result = balltrack("play", str(path), "--rate", "0", "--connect", router.endpoint)
     assert result.returncode == 0, result.stderr
     assert f"published {len(messages) + 1} messages" in result.stdout

@@ -46,3 +46,19 @@ def test_an_unwritable_output_is_named_before_anything_is_made(tmp_path):
     (tmp_path / "file").write_text("")
     assert unwritable_reason(tmp_path / "file" / "run.mcap") == f"{tmp_path / 'file'} is no folder"
     assert list(tmp_path.iterdir()) == [tmp_path / "file"]  # (nothing made)
+
+
+@pytest.mark.parametrize("argv, named", [(["info", "x", "--bogus"], "tool info"),
+                                         (["topic", "info", "k", "--bogus"], "tool topic info"),
+                                         (["--bogus", "info", "x"], "tool info")])
+def test_an_unknown_option_is_named_by_the_innermost_subcommand(capsys, argv, named):
+    parser = ArgumentParser(prog="tool")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
+    commands.add_parser("info").add_argument("file")
+    topic = commands.add_parser("topic").add_subparsers(dest="action", required=True, parser_class=ArgumentParser)
+    topic.add_parser("info").add_argument("key")
+    with pytest.raises(SystemExit) as exit_info:
+        parser.parse_args(argv)
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [f"{named}: unrecognized arguments: --bogus"]
+    assert parser.parse_args(["info", "x"]).file == "x"

@@ -135,3 +135,12 @@ def test_the_writer_thread_yields_the_cpu_and_only_it():
     thread.join()
     assert seen["writer"] == 19
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) < 19
+
+
+def test_info_times_agree_to_the_millisecond():
+    from balltrack.cli.recording import _when
+
+    # (.8976 s: the clock time and the seconds both read .897, neither rounded up)
+    shown = _when(1_796_195_070_897_600_000)
+    assert shown.endswith(".897 (1796195070.897)"), shown
+    assert _when(None) == "-"
