@@ -9,7 +9,8 @@ Subscribing to ``image_out`` is what makes the detector draw it, so the viewer c
 detector one annotated frame per camera frame while it runs. Zenoh callbacks only decode and
 hand over: showing (JPEG encoding of a raw frame, logging) happens on a thread of its own that
 keeps only the newest frame and a bounded queue of the rest, so a slow viewer drops (and counts,
-:attr:`Bridge.dropped`) rather than delaying the session's other callbacks. Malformed messages
+:attr:`Bridge.dropped`) rather than delaying the session's other callbacks, and drops what has
+waited over MAX_AGE rather than showing the past. Malformed messages
 are dropped and counted (:attr:`Bridge.rejected`).
 """
 
@@ -29,6 +30,11 @@ from balltrack.deploy.foxglove_messages import (CMD_VEL_TOPIC, IMAGE_TOPIC, SCEN
                                                 truth_scene, twist_json)
 
 LAGS_KEPT = 100_000
+# A live view shows the present: a queued message older than this (seconds) when its turn
+# comes is dropped and counted, so a viewer slowed down (Rerun's server waits for its slowest
+# web page) stays this close to now instead of drifting max_queued messages behind (a browser
+# rendering in software on the robot's own 2 cores put its plots 20 s behind).
+MAX_AGE = 0.5
 
 
 class Bridge:
@@ -40,7 +46,7 @@ class Bridge:
         self.keys = Keys(namespace)
         self.jpeg_quality = jpeg_quality
         self.rejected = 0
-        self.dropped = 0  # the viewer was more than max_queued messages behind
+        self.dropped = 0  # the viewer was more than max_queued messages or MAX_AGE behind
         self.handled = 0  # valid messages passed to a show_* method
         self.skipped_frames = 0  # a newer frame came before the viewer had shown this one
         # Seconds from a message's arrival to the end of its show_* call, the newest LAGS_KEPT.
@@ -94,6 +100,9 @@ class Bridge:
                     return
                 if self._queued:
                     handler, message, arrival = self._queued.popleft()
+                    if time.monotonic() - arrival > MAX_AGE:
+                        self.dropped += 1
+                        continue
                 else:
                     (message, arrival), self._newest_frame = self._newest_frame, None
                     handler = self.show_image
