@@ -265,15 +265,18 @@ class FrameFeed:
                 if wait > 0 and self.stop.wait(wait):
                     return
             image = self.reader.read()
+            # (A pass without one readable frame would loop forever: that ends too.)
+            if (image is None and not self.reader.live and self.settings().loop and self._since_rewind
+                    and self.reader.rewind()):
+                # The slot booked above is the next pass's first frame's: booking another for it
+                # lost one slot a pass (a single looped photo came at half of rate_hz).
+                self._since_rewind = 0
+                self.rewinds += 1
+                image = self.reader.read()
             if image is None:
                 if self.reader.live:
                     if not self._reconnect():
                         return
-                    continue
-                # (A pass without one readable frame would loop forever: that ends too.)
-                if self.settings().loop and self._since_rewind and self.reader.rewind():
-                    self._since_rewind = 0
-                    self.rewinds += 1
                     continue
                 self.ended = True
                 return

@@ -37,6 +37,8 @@ from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_S
 # The reference level's bright end is that of 3x3 areas of the frame's quarter sample (12x12
 # pixels of the frame).
 AREA_KERNEL = np.ones((3, 3), np.uint8)
+# The smallest frame side (px) the detector takes: its blur, sampling and CLAHE tiles need room.
+MIN_IMAGE_SIDE = 8
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
 EXPLAINED = 128
 
@@ -86,7 +88,7 @@ def check_image(image_bgr: np.ndarray) -> np.ndarray:
         image_bgr = cv2.cvtColor(image_bgr, cv2.COLOR_GRAY2BGR)
     if image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
         raise ValueError(f"image must be HxWx3 BGR, got shape {image_bgr.shape}")
-    if image_bgr.shape[0] < 8 or image_bgr.shape[1] < 8:
+    if image_bgr.shape[0] < MIN_IMAGE_SIDE or image_bgr.shape[1] < MIN_IMAGE_SIDE:
         raise ValueError(f"image too small: {image_bgr.shape[1]}x{image_bgr.shape[0]}")
     return image_bgr
 

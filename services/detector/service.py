@@ -16,11 +16,13 @@ import cv2
 from balltrack.common import keys
 from balltrack.common.images import bgr_to_message, image_to_bgr
 from balltrack.common.memory import keep_freed_memory
+from balltrack.common.messages import MessageError
 from balltrack.common.context import ServiceContext
 from balltrack.common.runner import run_service
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, compile_kernels
+from balltrack.services.detector.mask import MIN_IMAGE_SIDE
 
 
 def ball_fields(detection, width: int, height: int) -> dict:
@@ -58,6 +60,10 @@ def build(service: ServiceContext):
     service.on_config_change(on_config_change)
 
     def on_frame(frame: dict) -> None:
+        if min(frame["width"], frame["height"]) < MIN_IMAGE_SIDE:
+            # (a valid Image, but not one to find balls in: rejected as bad input, not as a bug)
+            raise MessageError(f"{frame['width']}x{frame['height']}: the detector takes frames of at least "
+                               f"{MIN_IMAGE_SIDE}x{MIN_IMAGE_SIDE} pixels")
         image = image_to_bgr(frame)
         result = detector["core"].detect(image)
         height, width = image.shape[:2]

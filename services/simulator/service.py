@@ -8,7 +8,9 @@ the safety stop zeroes it after ``cmd_timeout`` simulated seconds without one); 
 ``detected_balls`` and the liveliness tokens ``alive/*``. Queries: ``camera/camera_info`` ->
 CameraInfo; ``sim/control``: SimCommand -> SimReply (client: services/simulator/control.py).
 Stats add ``real_time_factor``, ``render_ms``, ``lockstep_timeouts``, ``frames``,
-``command_time`` (when the last cmd_vel was taken, simulated s); ``dropped`` counts realtime
+``command_stamp`` (the simulated time, integer ns as every time on the network, at which the
+last cmd_vel was taken; ``command_time``, the same in float seconds, stays for readers of the
+field it was first); ``dropped`` counts realtime
 schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``, ``encoding``,
 ``jpeg_quality`` and ``publish_images`` (false: no more frames, as from a failed camera; the
 world, clock and ground truth go on) may be changed live through ``simulator/config``.
@@ -146,7 +148,9 @@ def build(service: ServiceContext):
     service.stats.extra = lambda: {
         "real_time_factor": meter.factor(), "frames": simulation.frame_index,
         "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts,
-        **({} if simulation.command_time is None else {"command_time": simulation.command_time})}
+        **({} if simulation.command_time is None
+           else {"command_stamp": int(round(simulation.command_time * 1e9)),
+                 "command_time": simulation.command_time})}
 
     def frame(config: SimulatorConfig, next_info: float) -> float:
         """Step, render, pace, publish one frame; returns when the next camera_info is due."""

@@ -290,7 +290,7 @@ class TestChase:
         waited_from = time.monotonic()
 
         def settled(items):
-            taken_times = [message["command_time"] for arrival, message in items if arrival > waited_from]
+            taken_times = [message["command_stamp"] / 1e9 for arrival, message in items if arrival > waited_from]
             return taken_times[-1] if len(taken_times) >= 2 and taken_times[-1] == taken_times[-2] else None
 
         taken = chase.stats.wait_for_items(settled, 20, "two simulator stats alike after the safety stop")

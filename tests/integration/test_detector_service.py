@@ -112,6 +112,13 @@ def test_survives_bad_frames_and_live_config(session, detector):
                            "rejections counted")[0]
     assert final["rejected"] >= 1
     assert "rejected message on camera/image_raw" in detector.output()
+    # A valid Image too small to search is bad input, said as such (it was an "internal error")
+    tiny = encode("Image", bgr_to_message(floor_image(4, 4), 1, 5))
+    before = stats.messages[-1]["rejected"]
+    session.put("camera/image_raw", tiny)
+    stats.wait_for(lambda m: m[-1]["rejected"] > before, 5, "the tiny frame rejected")
+    assert "4x4: the detector takes frames of at least 8x8 pixels" in detector.output()
+    assert "internal error" not in detector.output()
 
     # Live change: a hue window that excludes yellow-green makes the ball disappear.
     assert query_config(session, "detector", {"h_min": 100, "h_max": 120})["ok"]

@@ -135,3 +135,37 @@ def test_photos_without_one_readable_file_end_even_with_loop(tmp_path):
     feed = FrameFeed(spec, ImageFiles(spec.paths), lambda: CameraConfig(source="x", loop=True), threading.Event())
     assert list(feed) == [] and feed.ended
     assert feed.stats()["unreadable_files"] == 1
+
+
+class SimulatedTime:
+    """A clock and a stop event in one: waiting moves the clock on by the time waited."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def clock(self) -> float:
+        return self.now
+
+    def is_set(self) -> bool:
+        return False
+
+    def wait(self, seconds: float) -> bool:
+        self.now += seconds
+        return False
+
+
+def test_looped_photos_keep_to_rate_hz_across_each_new_pass(tmp_path):
+    for index in range(2):
+        cv2.imwrite(str(tmp_path / f"{index}.png"), np.full((24, 32, 3), 100 * index, np.uint8))
+    spec = parse_source(str(tmp_path))
+    time_source = SimulatedTime()
+    feed = FrameFeed(spec, ImageFiles(spec.paths), lambda: CameraConfig(source="x", loop=True, rate_hz=10.0),
+                     time_source, clock=time_source.clock)
+    shown = []
+    for image in feed:
+        shown.append((round(time_source.now, 6), int(image.mean())))
+        if len(shown) == 6:
+            break
+    # (one frame per 0.1 s, the passes back to back: a rewind used to cost a slot of its own)
+    assert shown == [(0.0, 0), (0.1, 100), (0.2, 0), (0.3, 100), (0.4, 0), (0.5, 100)]
+    assert feed.rewinds == 2
