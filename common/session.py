@@ -228,8 +228,20 @@ def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | No
     try:
         return zenoh.open(config)
     except Exception as error:  # zenoh raises ZError with a multi-line message
-        where = ", ".join(endpoints or default_endpoints())
+        where = ", ".join(dialled_endpoints(config) or endpoints or default_endpoints())
         raise SessionOpenError(f"cannot reach a Zenoh router at {where}: {zenoh_reason(error)}") from None
+
+
+def dialled_endpoints(config) -> list[str]:
+    """The endpoints a session of ``config`` dials: those given, or those of its config file
+    (a secure profile's ``tls/...``); [] when it names none."""
+    try:
+        endpoints = json.loads(config.get_json("connect/endpoints"))
+    except Exception:  # (a config Zenoh cannot show: the caller names what it was given)
+        return []
+    if isinstance(endpoints, dict):  # (per mode: a client's)
+        endpoints = endpoints.get("client") or endpoints.get("peer")
+    return [str(endpoint) for endpoint in endpoints or []]
 
 
 def close_session(session) -> str | None:

@@ -96,7 +96,14 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
         raise LaunchError("--listen, --router-connect, --router-config and --host need --router")
     if args.secure and (args.router_config or args.zenoh_config):
         raise LaunchError("--secure names the Zenoh configs itself: no --router-config or --zenoh-config with it")
-    listen = args.listen or (secure_listen(args.secure, args.host) if args.secure and args.router else [DEFAULT_LISTEN])
+    if args.listen:
+        listen = args.listen
+    elif args.secure and args.router:
+        listen = secure_listen(args.secure, args.host)
+    else:
+        # (a --router-config's own endpoints stand: a file that keeps the router on 127.0.0.1
+        # must not be overridden by the default's every interface)
+        listen = (args.router_config and config_listen(args.router_config)) or [DEFAULT_LISTEN]
     # An endpoint or config file that Zenoh refuses is a bad argument (ZenohConfigError, a
     # ValueError), said before anything starts.
     if args.router:
@@ -112,10 +119,23 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
 def secure_listen(directory: str, host: str | None) -> list[str]:
     """The endpoints in a secure profile's router config (``tls/0.0.0.0:7447``)."""
     try:
-        config = load_config_file(secure_router_path(directory, host))
+        path = secure_router_path(directory, host)
     except ValueError as error:
         raise LaunchError(str(error)) from None
-    return json.loads(config.get_json("listen/endpoints"))
+    return config_listen(str(path))
+
+
+def config_listen(path: str) -> list[str]:
+    """The endpoints a router started with a Zenoh json5 config file listens on."""
+    try:
+        config = load_config_file(path)
+    except ValueError as error:
+        raise LaunchError(str(error)) from None
+    endpoints = json.loads(config.get_json("listen/endpoints"))
+    # (per mode, as Zenoh keeps its own default when the file names none: a router's)
+    if isinstance(endpoints, dict):
+        endpoints = endpoints.get("router")
+    return list(endpoints or [])
 
 
 def make_specs(services: list[str], overrides: dict[str, list[str]], router: bool = False,

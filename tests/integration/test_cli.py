@@ -247,9 +247,15 @@ def test_router_on_port_zero_prints_the_port_it_listens_on(log_dir):
         assert router.stop() == 0
 
 
-def test_no_router_is_a_clear_error():
-    result = balltrack("status", "--connect", "tcp/127.0.0.1:9", "--timeout", "1")
-    assert result.returncode == 1 and "cannot reach a Zenoh router" in result.stderr
+def test_no_router_is_a_clear_error(tmp_path):
+    port = free_port()
+    result = balltrack("status", "--connect", f"tcp/127.0.0.1:{port}", "--timeout", "1")
+    assert result.returncode == 1 and f"cannot reach a Zenoh router at tcp/127.0.0.1:{port}:" in result.stderr
+    # (the endpoint a --zenoh-config file dials is the one named, not the default's)
+    config = tmp_path / "client.json5"
+    config.write_text(f'{{mode: "client", connect: {{endpoints: ["tcp/127.0.0.1:{port}"]}}}}')
+    result = balltrack("status", "--zenoh-config", str(config), "--timeout", "1")
+    assert result.returncode == 1 and f"cannot reach a Zenoh router at tcp/127.0.0.1:{port}:" in result.stderr
 
 
 @pytest.mark.parametrize("command", [["echo", "detected_ball"], ["topic", "list"]])

@@ -10,6 +10,21 @@ def specs_for(*arguments):
     return build_specs(build_parser().parse_args(["start", *arguments]))
 
 
+def test_a_router_config_files_own_endpoints_stand(tmp_path):
+    private = tmp_path / "private.json5"
+    private.write_text('{mode: "router", listen: {endpoints: ["tcp/127.0.0.1:7501"]}}')
+    specs, info = specs_for("--router", "--router-config", str(private), "--services", "locator")
+    router = specs[0].argv
+    assert router[router.index("--listen") + 1] == "tcp/127.0.0.1:7501" and specs[0].port == 7501
+    assert info["connect"] == ["tcp/127.0.0.1:7501"]
+    # (a file without listen endpoints: the default's, and --listen still wins over the file)
+    bare = tmp_path / "bare.json5"
+    bare.write_text('{mode: "router"}')
+    assert specs_for("--router", "--router-config", str(bare), "--services", "locator")[0][0].port == 7447
+    assert specs_for("--router", "--router-config", str(private), "--listen", "tcp/127.0.0.1:7502",
+                     "--services", "locator")[0][0].port == 7502
+
+
 def test_router_first_and_services_connect_to_it(tmp_path):
     (tmp_path / "follower.toml").write_text("max_size_thresh = 0.3\n")
     specs, info = specs_for("--router", "--listen", "tcp/0.0.0.0:7500", "--services", "locator,follower",
