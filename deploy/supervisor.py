@@ -26,6 +26,8 @@ Rules:
   order), then to the router, each given ``stop_timeout`` seconds before SIGKILL. The
   supervisor exits 0 when every child exited 0 or was killed by that SIGTERM (a child still
   starting has no handler yet), 1 otherwise; pid files are removed.
+* A run folder's disk that is full or failing costs logs, pid files and status.json (written
+  again once it can be), never a child's start or restart.
 * Children run in their own session (a Ctrl-C in a terminal reaches the supervisor only, which
   then stops them in order) and get SIGTERM from the kernel if the supervisor itself dies.
 """
@@ -167,7 +169,11 @@ def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.
 
 def write_json_atomically(path: Path, data: dict) -> None:
     temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    temporary.write_text(json.dumps(data, indent=2) + "\n")
+    try:
+        temporary.write_text(json.dumps(data, indent=2) + "\n")
+    except OSError:
+        temporary.unlink(missing_ok=True)  # (a part-written file would hold the space)
+        raise
     os.replace(temporary, path)
 
 
@@ -198,16 +204,25 @@ class Child:
         return self.popen.pid if self.popen is not None and self.popen.poll() is None else None
 
     def start(self) -> None:
-        self._log_handle = open(self.log_path, "ab")
-        stamp = time.strftime("%Y-%m-%d %H:%M:%S")
-        self._log_handle.write(f"=== {stamp} start #{self.restarts + 1}: "
-                               f"{' '.join(self.spec.argv)}\n".encode())
-        self._log_handle.flush()
+        # A full or failing log disk costs the logs, never the child: a robot must not stop
+        # because its run folder filled up.
+        try:
+            self._log_handle = open(self.log_path, "ab")
+            stamp = time.strftime("%Y-%m-%d %H:%M:%S")
+            self._log_handle.write(f"=== {stamp} start #{self.restarts + 1}: "
+                                   f"{' '.join(self.spec.argv)}\n".encode())
+            self._log_handle.flush()
+        except OSError as error:
+            LOG.warning("%s: %s not written (%s)", self.spec.name, self.log_path.name, error)
+        output = self._log_handle if self._log_handle is not None else subprocess.DEVNULL
         self.popen = subprocess.Popen(
-            self.spec.argv, stdout=self._log_handle, stderr=subprocess.STDOUT,
+            self.spec.argv, stdout=output, stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL, env=child_environment(self.spec.env),
             start_new_session=True, preexec_fn=die_with_parent if sys.platform == "linux" else None)
-        self.pid_path.write_text(f"{self.popen.pid}\n")
+        try:
+            self.pid_path.write_text(f"{self.popen.pid}\n")
+        except OSError as error:
+            LOG.warning("%s: %s not written (%s)", self.spec.name, self.pid_path.name, error)
         self.started_at = time.monotonic()
         self.started_wall = time.time()
         self.state = RUNNING
@@ -226,7 +241,10 @@ class Child:
         self.last_exit = returncode
         self.pid_path.unlink(missing_ok=True)
         if self._log_handle is not None:
-            self._log_handle.close()
+            try:
+                self._log_handle.close()
+            except OSError:  # (what it buffered could not be written: the disk is full)
+                pass
             self._log_handle = None
 
     def terminate(self) -> None:
@@ -266,14 +284,23 @@ class Supervisor:
         self.state = STARTING
         self.exit_code: int | None = None
         self.stop = threading.Event()
+        self._status_error: str | None = None  # why the last status.json was not written
 
     # -- status -------------------------------------------------------------------------
     def write_status(self) -> None:
-        write_json_atomically(self.run_dir / "status.json", {
-            "supervisor": {"pid": os.getpid(), "state": self.state, "exit_code": self.exit_code,
-                           "updated": time.time(), **self.info},
-            "children": {child.spec.name: child.status() for child in self.children},
-        })
+        try:
+            write_json_atomically(self.run_dir / "status.json", {
+                "supervisor": {"pid": os.getpid(), "state": self.state, "exit_code": self.exit_code,
+                               "updated": time.time(), **self.info},
+                "children": {child.spec.name: child.status() for child in self.children},
+            })
+        except OSError as error:
+            # (supervising goes on: status.json is a report, kept until it can be written again)
+            if str(error) != self._status_error:
+                LOG.warning("status.json not written (%s); supervising goes on", error)
+            self._status_error = str(error)
+        else:
+            self._status_error = None
 
     # -- running ------------------------------------------------------------------------
     def _wait_for_port(self, child: Child) -> bool:
@@ -378,6 +405,8 @@ class Supervisor:
                     elif (child.state == RUNNING and child.quick_failures
                           and now - child.started_at >= self.settings.stable_after):
                         child.quick_failures = 0
+                if self._status_error is not None:  # (the disk may have room again)
+                    self.write_status()
                 if all(child.state in (EXITED, FAILED) for child in self.children):
                     LOG.info("no child left to supervise")
                     break

@@ -75,7 +75,7 @@ def _run_folder_status(args) -> int:
     result = collect_status(run_dir, args.timeout, network=not args.no_network)
     if args.json:
         print(json.dumps(result, indent=2))
-        return 0 if result["supervisor"].get("running") else 1
+        return _run_folder_status_code(result)
     supervisor = result["supervisor"]
     if "error" in result:
         print(f"{run_dir}: {result['error']}", file=sys.stderr)
@@ -104,7 +104,15 @@ def _run_folder_status(args) -> int:
         for service, entry in child.get("services", {}).items():  # (each of a joined process's)
             alive, figures = shown(entry)
             print(f"{'  ' + service:<{width}} {'':>7} {'':<8} {'':>8} {'':<18} {alive:<5} {figures}".rstrip())
-    return 0 if supervisor["running"] else 1
+    return _run_folder_status_code(result)
+
+
+def _run_folder_status_code(result: dict) -> int:
+    """0: the supervisor runs and no child has failed; 1: it does not run; 3: it runs, but a
+    child is ``failed`` (given up or misconfigured: not restarted), for scripts that check health."""
+    if not result["supervisor"].get("running"):
+        return 1
+    return 3 if any(child.get("state") == "failed" for child in result.get("children", {}).values()) else 0
 
 
 

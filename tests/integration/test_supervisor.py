@@ -1,8 +1,14 @@
 """The supervisor's restart policy with tiny stand-in children (no Zenoh, a few seconds)."""
 
+import errno
 import json
+import os
+import signal
+import subprocess
 import sys
 import threading
+
+import pytest
 
 from balltrack.deploy.supervisor import ChildSpec, Supervisor, SupervisorSettings
 from tests.harness import wait_until
@@ -88,3 +94,59 @@ def test_a_child_that_the_stop_kills_before_it_handles_sigterm_has_stopped_clean
     assert not thread.is_alive()
     assert result["code"] == 0
     assert status(tmp_path)["children"]["starting"]["last_exit"] == -15
+
+
+def mounted_small_disk(path) -> bool:
+    """A 256 KiB tmpfs at ``path`` (a disk that fills up for real); False where mounting is not allowed."""
+    path.mkdir()
+    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(path)],
+                            capture_output=True, text=True)
+    return result.returncode == 0
+
+
+def test_a_full_log_disk_costs_the_logs_not_the_children(tmp_path):
+    run_dir = tmp_path / "run"
+    if not mounted_small_disk(run_dir):
+        pytest.skip("mounting a small tmpfs needs root (the full-disk case needs a disk that fills up)")
+    try:
+        supervisor = Supervisor(run_dir, [child("worker", "import time; print('ready', flush=True); time.sleep(120)")],
+                                FAST)
+        thread, result = run_in_thread(supervisor)
+        wait_ready(run_dir, "worker")
+        first = supervisor.children[0].popen.pid
+        # (fill the disk to the last byte)
+        with open(run_dir / "filler", "wb", buffering=0) as filler:
+            try:
+                while True:
+                    filler.write(b"\0" * 4096)
+            except OSError as error:
+                assert error.errno == errno.ENOSPC
+        os.kill(first, signal.SIGKILL)
+        restarted = wait_until(lambda: supervisor.children[0].restarts == 1 and supervisor.children[0].pid, 20,
+                               "the worker restarted with the disk full")
+        assert restarted != first and thread.is_alive()
+        (run_dir / "filler").unlink()
+        wait_until(lambda: status(run_dir).get("children", {}).get("worker", {}).get("restarts") == 1, 20,
+                   "status.json written again once there is room")
+        supervisor.stop.set()
+        thread.join(20)
+        assert result["code"] == 0
+    finally:
+        subprocess.run(["umount", "-l", str(run_dir)], capture_output=True)
+
+
+def test_status_of_a_run_folder_exits_3_while_a_child_is_given_up(tmp_path):
+    supervisor = Supervisor(tmp_path, [child("worker", "import time; print('ready', flush=True); time.sleep(120)"),
+                                       child("crashing", "import sys; sys.exit(3)")], FAST)
+    thread, _ = run_in_thread(supervisor)
+    try:
+        wait_ready(tmp_path, "worker")
+        wait_until(lambda: status(tmp_path).get("children", {}).get("crashing", {}).get("state") == "failed", 20,
+                   "the crashing child given up")
+        result = subprocess.run([sys.executable, "-m", "balltrack", "status", "--run-dir", str(tmp_path),
+                                 "--no-network"], capture_output=True, text=True, timeout=60)
+        assert result.returncode == 3, result.stdout + result.stderr
+        assert "crashing" in result.stdout and "failed" in result.stdout
+    finally:
+        supervisor.stop.set()
+        thread.join(20)
