@@ -21,6 +21,7 @@ import argparse
 import logging
 import os
 import sys
+import threading
 import time
 from typing import Any, Callable
 
@@ -73,6 +74,11 @@ def build_parser(name: str, description: str | None, config_class=None) -> argpa
     add_session_arguments(parser, role=name, peer=True)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
+
+
+# Seconds a stopped process waits for its teardown (tokens, entities, session) before it exits
+# without it: past Zenoh's own ~10 s for a router out of reach, within a supervisor's 15 s.
+CLOSE_LIMIT_S = 12.0
 
 
 def run_service(name: str, config_class, build: Callable[[ServiceContext], Callable | None],
@@ -188,9 +194,9 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
             refused.append(error)
             stop.set()
 
+    tokens = []
     try:
         loops = []
-        tokens = []
         for context, (_, _, build) in zip(contexts, services):
             loop = build(context)
             if loop is not None:
@@ -203,8 +209,6 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
         # A timed wait keeps the main thread responsive to signals on every platform.
         while not stop.wait(0.5):
             pass
-        for token in tokens:
-            token.undeclare()
         if refused:
             raise refused[0]
     except (ConfigError, ValueError) as error:
@@ -212,14 +216,37 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
         status = 2
     finally:
         stop.set()
-        for context in reversed(contexts):
-            context.close()
-        reason = close_session(session)
-        if reason:
-            logging.getLogger(label).warning("%s", reason)
+        closing = threading.Thread(target=_close, args=(label, tokens, contexts, session), daemon=True)
+        closing.start()
+        closing.join(CLOSE_LIMIT_S)
+        if closing.is_alive():
+            # Zenoh gives up on its own after ~10 s, but undeclaring behind a backlog of frames
+            # to a frozen router took 20 s (TLS): past a supervisor's SIGKILL. The process has
+            # stopped serving; the router forgets its session when the lease ends.
+            logging.getLogger(label).warning("not closed %g s after the stop (its router out of reach?): "
+                                             "exiting without waiting longer", CLOSE_LIMIT_S)
+            for context in contexts:
+                context.log.info("stopped")
+            logging.shutdown()
+            os._exit(status)
     for context in contexts:
         context.log.info("stopped")
     return status
+
+
+def _close(label: str, tokens: list, contexts: list[ServiceContext], session) -> None:
+    """A stopped process's teardown: liveliness tokens, then each service's entities and
+    threads, then the session."""
+    try:
+        for token in tokens:
+            token.undeclare()
+    except Exception:  # (the session closes next anyway)
+        pass
+    for context in reversed(contexts):
+        context.close()
+    reason = close_session(session)
+    if reason:
+        logging.getLogger(label).warning("%s", reason)
 
 
 def _announce(context: ServiceContext):
