@@ -258,6 +258,20 @@ def make_authority(days: int = CA_DAYS):
     return key, certificate
 
 
+def certificate_names(path: str) -> list[str]:
+    """The subject alternative names (host names and addresses) of a PEM certificate file: the
+    addresses a client may dial its holder at ([] when it has none)."""
+    from cryptography import x509
+
+    certificate = x509.load_pem_x509_certificate(Path(path).read_bytes())
+    try:
+        alternative = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return []
+    return [*alternative.get_values_for_type(x509.DNSName),
+            *(str(address) for address in alternative.get_values_for_type(x509.IPAddress))]
+
+
 def make_leaf(authority, common_name: str, names: list[str] = (), server: bool = False,
               days: int = LEAF_DAYS):
     """(private key, certificate) signed by ``authority``; ``names`` become subject alternative

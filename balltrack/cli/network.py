@@ -42,7 +42,13 @@ def command_router(args) -> int:
     # system chose for port 0, each interface's address for 0.0.0.0.
     listening = ", ".join(listen)
     locators = own_locators(session)
-    if locators and sorted(locators) != sorted(listen):
+    names = tls_names(config)
+    if names is not None:
+        # (a TLS client checks the router's name: only those its certificate holds are reached)
+        ports = sorted({endpoint.rsplit(":", 1)[-1] for endpoint in locators or listen if endpoint.startswith("tls/")})
+        listening += f" (reached at {', '.join(f'tls/{name}:{port}' for port in ports for name in names)}: " \
+                     "the names its certificate holds)"
+    elif locators and sorted(locators) != sorted(listen):
         listening += f" (reached at {', '.join(locators)})"
     print(f"router {session.zid()} listening on {listening}", flush=True)
     stop = stop_on_signals()
@@ -50,6 +56,22 @@ def command_router(args) -> int:
         pass
     close_or_report(args, session)
     return 0
+
+
+def tls_names(config) -> list[str] | None:
+    """The names a TLS router's certificate holds (None: no TLS certificate in ``config``)."""
+    from balltrack.deploy.secure import certificate_names
+
+    try:
+        path = json.loads(config.get_json("transport/link/tls/listen_certificate"))
+    except Exception:  # (no TLS section)
+        return None
+    if not path:
+        return None
+    try:
+        return certificate_names(path)
+    except (OSError, ValueError):  # (Zenoh says what is wrong with it when it listens)
+        return None
 
 
 def own_locators(session, timeout: float = 2.0) -> list[str]:

@@ -140,6 +140,19 @@ def test_plain_tcp_is_refused(profile, secure_router):
     assert_refused(config)
 
 
+def test_the_router_says_the_names_clients_may_dial_it_at(profile, tmp_path):
+    # (the names its certificate holds: an interface's address it lacks would be refused)
+    port = free_port()
+    process = Process([sys.executable, "-m", "balltrack", "router", "--secure", str(profile),
+                       "--listen", f"tls/0.0.0.0:{port}"], tmp_path / "router.log")
+    try:
+        process.wait_for_output("listening on", 20)
+    finally:
+        assert process.stop() == 0, process.output()
+    assert (f"listening on tls/0.0.0.0:{port} (reached at tls/testhost:{port}, tls/localhost:{port}, "
+            f"tls/127.0.0.1:{port}: the names its certificate holds)") in process.output()
+
+
 def test_a_router_address_its_certificate_does_not_name_is_refused(profile, secure_router):
     config = role_config(profile, "locator", secure_router)
     config.insert_json5("connect/endpoints", json.dumps([f"tls/127.0.0.2:{secure_router}"]))
