@@ -195,6 +195,10 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     peers = router and not connect and not secure and not zenoh_config
     if connect:
         connect = list(connect)
+    elif router and secure and list(listen) == secure_listen(secure, host):
+        # (the profile's own client endpoints name this router as its certificate does; a
+        # --no-localhost profile's certificate lacks the 127.0.0.1 that local_endpoint dials)
+        connect = []
     elif router:
         connect = [local_endpoint(listen[0])]
     elif zenoh_config:

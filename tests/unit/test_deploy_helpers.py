@@ -174,3 +174,16 @@ def test_a_peer_session_listens_on_loopback_only_and_needs_its_router():
     assert json.loads(client_config(["tcp/127.0.0.1:7500"]).get_json("mode")) == "client"
     with pytest.raises(ValueError, match="no Zenoh config file"):
         client_config(None, "client.json5", peer=True)
+
+
+def test_a_secure_router_started_here_is_dialled_as_its_profile_names_it(tmp_path):
+    from balltrack.deploy.secure import init_profile
+
+    # (a profile whose certificate lacks 127.0.0.1: its clients' own endpoint is the one to dial)
+    init_profile(tmp_path / "profile", ["127.0.0.2"], port=7603, local=False)
+    specs, info = specs_for("--router", "--secure", str(tmp_path / "profile"), "--services", "locator")
+    assert info["connect"] == [] and "--connect" not in specs[1].argv
+    # (a --listen of its own: this host's address for it, as without a profile)
+    specs, info = specs_for("--router", "--secure", str(tmp_path / "profile"), "--listen", "tls/0.0.0.0:7604",
+                            "--services", "locator")
+    assert info["connect"] == ["tls/127.0.0.1:7604"]
