@@ -232,16 +232,23 @@ def open_session(endpoints: list[str] | None = None, zenoh_config_file: str | No
         raise SessionOpenError(f"cannot reach a Zenoh router at {where}: {zenoh_reason(error)}") from None
 
 
+def config_endpoints(config, section: str, modes: tuple[str, ...]) -> list[str]:
+    """The ``section`` ("listen" or "connect") endpoints of a Zenoh ``config``: a list, or,
+    per mode as Zenoh keeps its own defaults, the first of ``modes`` that has some; [] when
+    there are none or Zenoh cannot show them."""
+    try:
+        endpoints = json.loads(config.get_json(f"{section}/endpoints"))
+    except Exception:  # (a config Zenoh cannot show: the caller names what it was given)
+        return []
+    if isinstance(endpoints, dict):
+        endpoints = next((endpoints[mode] for mode in modes if endpoints.get(mode)), [])
+    return [str(endpoint) for endpoint in endpoints or []]
+
+
 def dialled_endpoints(config) -> list[str]:
     """The endpoints a session of ``config`` dials: those given, or those of its config file
     (a secure profile's ``tls/...``); [] when it names none."""
-    try:
-        endpoints = json.loads(config.get_json("connect/endpoints"))
-    except Exception:  # (a config Zenoh cannot show: the caller names what it was given)
-        return []
-    if isinstance(endpoints, dict):  # (per mode: a client's)
-        endpoints = endpoints.get("client") or endpoints.get("peer")
-    return [str(endpoint) for endpoint in endpoints or []]
+    return config_endpoints(config, "connect", ("client", "peer"))
 
 
 def close_session(session) -> str | None:

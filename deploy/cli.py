@@ -28,7 +28,7 @@ from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
 from balltrack.common.network import port_taken
-from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
+from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session, config_endpoints,
                                       default_endpoints, load_config_file, router_config,
                                       secure_client_path, secure_router_path)
 from balltrack.common.status import service_status
@@ -131,11 +131,7 @@ def config_listen(path: str) -> list[str]:
         config = load_config_file(path)
     except ValueError as error:
         raise LaunchError(str(error)) from None
-    endpoints = json.loads(config.get_json("listen/endpoints"))
-    # (per mode, as Zenoh keeps its own default when the file names none: a router's)
-    if isinstance(endpoints, dict):
-        endpoints = endpoints.get("router")
-    return list(endpoints or [])
+    return config_endpoints(config, "listen", ("router",))
 
 
 def make_specs(services: list[str], overrides: dict[str, list[str]], router: bool = False,

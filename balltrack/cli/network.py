@@ -8,8 +8,8 @@ from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.messages import SIM_OPS
-from balltrack.common.session import (DEFAULT_PORT, ZenohConfigError, router_config, secure_router_path,
-                                      zenoh_reason)
+from balltrack.common.session import (DEFAULT_PORT, ZenohConfigError, config_endpoints, router_config,
+                                      secure_router_path, zenoh_reason)
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.common.status import service_status
 
@@ -32,7 +32,7 @@ def command_router(args) -> int:
         print(f"balltrack router: {error}", file=sys.stderr)
         return 2
     try:
-        listen = listen or json.loads(config.get_json("listen/endpoints"))
+        listen = listen or config_endpoints(config, "listen", ("router",))
         session = zenoh.open(config)
     except Exception as error:
         print(f"balltrack router: cannot listen on {', '.join(map(str, listen)) or 'its endpoints'}: "
