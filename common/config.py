@@ -96,7 +96,12 @@ def choices(annotation: Any) -> tuple[str, ...] | None:
 
 
 def _number_text(value: float) -> str:
-    return format(value, "g") if isinstance(value, float) else str(value)
+    # Short where that is exact; in full where six digits would state another bound (pi as
+    # 3.14159 reads as if 3.14159 itself were refused).
+    if not isinstance(value, float):
+        return str(value)
+    short = format(value, "g")
+    return short if float(short) == value else repr(value)
 
 
 def bounds_text(declared: Param | None) -> str:

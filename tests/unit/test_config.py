@@ -4,6 +4,7 @@ all read the same declaration, for every service's config."""
 import dataclasses
 import enum
 import math
+import re
 import subprocess
 import sys
 import typing
@@ -61,6 +62,17 @@ def test_every_field_is_declared_with_a_distinct_one_line_meaning(service, cls):
         meanings.setdefault(declared.meaning, []).append(field.name)
     shared = {meaning: names for meaning, names in meanings.items() if len(names) > 1}
     assert not shared, f"{service}: parameters share a meaning: {shared}"
+
+
+@pytest.mark.parametrize("cls, field, annotation", every_field(
+    lambda field, annotation: annotation in (int, float) and outside_values(field, annotation)))
+def test_stated_bounds_are_the_enforced_ones(cls, field, annotation):
+    # A bound printed rounded (pi as 3.14159) tells the user a value is refused that is not.
+    declared = declaration(field)
+    stated = describe_config(cls)[field.name]["bounds"]
+    numbers = [float(text) for text in re.findall(r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?", stated)]
+    enforced = [bound for bound in (declared.off, declared.low, declared.high) if bound is not None]
+    assert numbers == [float(bound) for bound in enforced], (stated, enforced)
 
 
 @pytest.mark.parametrize("cls, field, annotation", every_field(
