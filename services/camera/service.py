@@ -3,7 +3,8 @@
 Publishes: ``camera/image_raw`` (Image, ``encoding`` jpeg by default; header stamp = wall time
 of the read, seq = frame index from 0, frame_id "camera") and ``camera/camera_info``
 (CameraInfo, intrinsics from ``calibration`` or the ideal pinhole of ``hfov``, with the
-distortion model) with the first frame and then once a second; ``camera/camera_info`` is also
+distortion model) with the first frame, with each frame whose size differs from the one before,
+and then once a second; ``camera/camera_info`` is also
 answered as a query, as the simulator does. Stats add ``frames``, ``disconnects`` and
 ``reconnects`` (a live source that stopped delivering and was reopened), ``skipped_frames``
 (live frames left out to keep to ``rate_hz``), ``rewinds`` and ``unreadable_files``.
@@ -70,6 +71,7 @@ def build(service: ServiceContext):
 
     def loop(context: ServiceContext) -> None:
         next_info = 0.0
+        announced_size = None
         try:
             for seq, image in enumerate(feed):
                 started = time.perf_counter()
@@ -85,11 +87,12 @@ def build(service: ServiceContext):
                     context.reject(context.keys(keys.IMAGE_RAW), f"frame {seq}: {error}")
                     continue
                 # The camera_info first: a locator then knows the camera before the first
-                # detection made from this frame reaches it.
+                # detection made from this frame reaches it, at once when the size changes
+                # (photos of several sizes), not up to a second later.
                 now = time.monotonic()
-                if now >= next_info:
+                if now >= next_info or (width, height) != announced_size:
                     infos.put(info)
-                    next_info = now + 1.0
+                    next_info, announced_size = now + 1.0, (width, height)
                 images.put(message)
                 context.stats.record_duration(time.perf_counter() - started)
         finally:

@@ -1,7 +1,7 @@
 """Locator service: ``detected_ball`` -> ``detected_ball_3d`` (paper section 2.3).
 
 Subscribes: ``detected_ball`` (Ball2D), ``camera/camera_info`` (CameraInfo, also queried once
-at start). Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header copied from
+at start; kept per frame size, and a detection is located with its own frame size's). Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header copied from
 the detection so end-to-end latency stays measurable).
 
 Example:
@@ -17,22 +17,33 @@ from balltrack.services.locator.config import LocatorConfig
 from balltrack.common.pinhole import Intrinsics
 from balltrack.services.locator.geometry import faithful_v_fov, locate_exact, locate_faithful
 
+# Frame sizes whose CameraInfo is kept; a source cycling through more is re-announced anyway.
+MAX_SIZES = 16
+
 
 def build(service: ServiceContext):
     output = service.publisher(keys.DETECTED_BALL_3D, "Ball3D")
-    camera: dict[str, Intrinsics] = {}
+    # By frame size: a camera whose frames change size (photos from several cameras, a
+    # resolution switch) announces each size's intrinsics, and detections made from frames of
+    # one size may still arrive after the next size's CameraInfo.
+    cameras: dict[tuple[int, int], Intrinsics] = {}
 
     def on_camera_info(info: dict) -> None:
         try:
-            camera["intrinsics"] = Intrinsics.from_camera_info(info)
+            intrinsics = Intrinsics.from_camera_info(info)
         except ValueError as error:
             raise MessageError(str(error)) from None
+        size = (intrinsics.width, intrinsics.height)
+        if len(cameras) >= MAX_SIZES and size not in cameras:
+            cameras.pop(next(iter(cameras)))
+        cameras.pop(size, None)  # re-inserted last: the oldest size is the one to forget
+        cameras[size] = intrinsics
 
     def on_ball(ball: dict) -> None:
         config = service.config
         width, height = ball["image_width"], ball["image_height"]
-        intrinsics = camera.get("intrinsics")
-        matches = intrinsics is not None and (intrinsics.width, intrinsics.height) == (width, height)
+        intrinsics = cameras.get((width, height))
+        matches = intrinsics is not None
         try:
             if config.resolved_mode(matches) == "exact" and matches:
                 position = locate_exact(ball["u"], ball["v"], ball["radius_px"], intrinsics,
@@ -54,7 +65,7 @@ def build(service: ServiceContext):
         # The simulator also answers camera_info as a query, so a locator started late need
         # not wait up to a second for the next periodic message.
         for reply in service.session.get(service.keys(keys.CAMERA_INFO), timeout=2.0):
-            if reply.ok is not None and "intrinsics" not in camera:
+            if reply.ok is not None and not cameras:
                 service.process(service.keys(keys.CAMERA_INFO), "CameraInfo",
                                  reply.ok.payload.to_bytes(), on_camera_info, count=False)
 

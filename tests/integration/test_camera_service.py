@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from balltrack.common.images import image_to_bgr
+from balltrack.common.messages import decode
 from balltrack.services.camera.calibration import CameraModel, write_calibration
 from tests.harness import Collector, free_port, query_config, start_service
 
@@ -176,3 +177,30 @@ def test_unreadable_photos_are_skipped_and_counted(session, launch, photos):
     stats = Collector(session, "camera/stats", "Stats").wait_for(
         lambda m: m and m[-1]["unreadable_files"] >= 2, 10, "unreadable files counted")
     assert stats
+
+
+def test_a_new_frame_size_is_announced_before_its_frame(session, launch, tmp_path):
+    # Photos of two sizes in turn, faster than the once-a-second CameraInfo: each frame's size
+    # must be the latest CameraInfo's when the frame arrives, or a locator uses the other size's.
+    folder = tmp_path / "sizes"
+    folder.mkdir()
+    for index in range(4):
+        image = numbered_frame(index % 3)
+        cv2.imwrite(str(folder / f"frame{index:02d}.png"), image if index % 2 == 0 else image[::2, ::2])
+    arrivals = Collector(session, "camera/*", None)  # one subscriber: both keys in arrival order
+    launch("camera", f"source={folder}", "rate_hz=20", "loop=true", "encoding=bgr8")
+
+    def images(messages):
+        return [item for item in messages if item["key"] == "camera/image_raw"]
+
+    arrivals.wait_for(lambda messages: len(images(messages)) >= 12, 30, "12 frames")
+    latest_size, checked = None, 0
+    for item in list(arrivals.messages):
+        if item["key"] == "camera/camera_info":
+            info = decode("CameraInfo", item["payload"])
+            latest_size = (info["width"], info["height"])
+        elif item["key"] == "camera/image_raw" and latest_size is not None:
+            image = decode("Image", item["payload"])
+            assert (image["width"], image["height"]) == latest_size, image["header"]["seq"]
+            checked += 1
+    assert checked >= 10

@@ -11,16 +11,23 @@ from tests.harness import Collector, garbage_payloads, put_until, query_config
 
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089
 INTRINSICS = Intrinsics.from_fov(WIDTH, HEIGHT, HFOV)
-CAMERA_INFO = {"header": header(0, 0), "width": WIDTH, "height": HEIGHT,
-               "fx": INTRINSICS.fx, "fy": INTRINSICS.fy, "cx": INTRINSICS.cx, "cy": INTRINSICS.cy,
-               "hfov": INTRINSICS.h_fov, "vfov": INTRINSICS.v_fov}
 
 
-def ball_message(point, seq, radius=0.033):
-    u, v, radius_px = project_sphere(point, radius, INTRINSICS)
-    return {"header": header(1_000_000 + seq, seq), "x": (u - WIDTH / 2) / (WIDTH / 2),
-            "y": (v - HEIGHT / 2) / (HEIGHT / 2), "z": 2 * radius_px / WIDTH, "u": u, "v": v,
-            "radius_px": radius_px, "image_width": WIDTH, "image_height": HEIGHT, "score": 1.0}
+def camera_info(intrinsics):
+    return {"header": header(0, 0), "width": intrinsics.width, "height": intrinsics.height,
+            "fx": intrinsics.fx, "fy": intrinsics.fy, "cx": intrinsics.cx, "cy": intrinsics.cy,
+            "hfov": intrinsics.h_fov, "vfov": intrinsics.v_fov}
+
+
+CAMERA_INFO = camera_info(INTRINSICS)
+
+
+def ball_message(point, seq, radius=0.033, intrinsics=INTRINSICS):
+    u, v, radius_px = project_sphere(point, radius, intrinsics)
+    width, height = intrinsics.width, intrinsics.height
+    return {"header": header(1_000_000 + seq, seq), "x": (u - width / 2) / (width / 2),
+            "y": (v - height / 2) / (height / 2), "z": 2 * radius_px / width, "u": u, "v": v,
+            "radius_px": radius_px, "image_width": width, "image_height": height, "score": 1.0}
 
 
 @pytest.fixture
@@ -87,3 +94,30 @@ def test_survives_every_kind_of_bad_input(session, locator):
     assert output.messages[1]["header"]["seq"] == 2
     stats.wait_for(lambda m: m and m[-1]["rejected"] >= len(cases), 5, f"{len(cases)} rejected")
     assert "rejected message on detected_ball" in locator.output()
+
+
+def test_each_frame_size_is_located_with_its_own_camera_info(session, locator):
+    # Photos from two cameras: another size, lens and principal point. Detections of the first
+    # size still arrive after the second size's CameraInfo; each is located with its own.
+    other = Intrinsics(250.0, 252.0, 170.0, 110.0, 320, 240)
+    output = Collector(session, "detected_ball_3d", "Ball3D")
+    point = (0.3, -0.1, 1.2)
+    truth = math.dist(point, (0, 0, 0))
+    intrinsics_of = {0: INTRINSICS, 1: other}
+
+    def both_exact(messages):
+        latest = {message["header"]["seq"] % 2: message for message in messages}
+        return len(latest) == 2 and all(abs(message["distance"] - truth) < 0.005 * truth
+                                        for message in latest.values())
+
+    def put(attempt):
+        # Both CameraInfos each time (one put before the locator subscribed is lost), the
+        # other size's last.
+        for size in (1 - attempt % 2, attempt % 2):
+            session.put("camera/camera_info", encode("CameraInfo", camera_info(intrinsics_of[size])))
+        session.put("detected_ball", encode(
+            "Ball2D", ball_message(point, attempt, intrinsics=intrinsics_of[1 - attempt % 2])))
+
+    put_until(put, output, both_exact, 40, 0.1, "both sizes located exactly")
+    for position in output.messages[-2:]:
+        assert math.dist((position["x"], position["y"], position["z"]), point) < 0.005 * truth
