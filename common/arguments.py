@@ -30,9 +30,25 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def parse_args(self, args=None, namespace=None):
         parsed, extras = self.parse_known_args(args, namespace)
+        command = getattr(parsed, "parser_of_command", self)
+        extras = command._take_trailing_values(parsed, extras)
         if extras:
-            getattr(parsed, "parser_of_command", self).error(f"unrecognized arguments: {' '.join(extras)}")
+            command.error(f"unrecognized arguments: {' '.join(extras)}")
         return parsed
+
+    def _take_trailing_values(self, parsed, extras: list[str]) -> list[str]:
+        """Values of a last any-number positional given after an option (``config locator
+        --connect X a=1 b=2``), which argparse leaves over once the positionals before the
+        option were taken; the extras left."""
+        positionals = [action for action in self._actions if not action.option_strings]
+        if not extras or not positionals or positionals[-1].nargs not in ("*", "+"):
+            return extras
+        last = positionals[-1]
+        values = [extra for extra in extras if not extra.startswith("-")]
+        if values and last.type is None and last.choices is None:
+            setattr(parsed, last.dest, list(getattr(parsed, last.dest) or []) + values)
+            return [extra for extra in extras if extra.startswith("-")]
+        return extras
 
 
 def number(minimum: float | None = None, above: float | None = None) -> Callable[[str], float]:

@@ -62,3 +62,29 @@ def test_an_unknown_option_is_named_by_the_innermost_subcommand(capsys, argv, na
     assert exit_info.value.code == 2
     assert capsys.readouterr().err.strip().splitlines() == [f"{named}: unrecognized arguments: --bogus"]
     assert parser.parse_args(["info", "x"]).file == "x"
+
+
+@pytest.mark.parametrize("argv, rest", [
+    (["config", "locator", "--connect", "tcp/h:1", "a=1", "b=2"], ["a=1", "b=2"]),
+    (["config", "locator", "a=1", "--connect", "tcp/h:1", "b=2"], ["a=1", "b=2"]),
+    (["config", "locator", "a=1", "b=2", "--connect", "tcp/h:1"], ["a=1", "b=2"]),
+    (["config", "--connect", "tcp/h:1", "locator", "a=1"], ["a=1"])])
+def test_values_of_a_last_positional_may_follow_options(argv, rest):
+    parser = ArgumentParser(prog="tool")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
+    config = commands.add_parser("config")
+    config.add_argument("target")
+    config.add_argument("rest", nargs="*")
+    config.add_argument("--connect")
+    parsed = parser.parse_args(argv)
+    assert (parsed.target, parsed.rest, parsed.connect) == ("locator", rest, "tcp/h:1")
+
+
+def test_an_unknown_option_among_trailing_values_is_still_refused(capsys):
+    parser = ArgumentParser(prog="tool")
+    parser.add_argument("target")
+    parser.add_argument("rest", nargs="*")
+    parser.add_argument("--connect")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["locator", "--connect", "x", "a=1", "--bogus", "b=2"])
+    assert capsys.readouterr().err.strip() == "tool: unrecognized arguments: --bogus"
