@@ -28,8 +28,9 @@ class CameraConfig:
 
     # OpenCV opens all of them (cv2.VideoCapture; photos decoded by common.images.read_image, in
     # name order).
-    source: str = param("0", "a device index (`0`) or path (`/dev/video0`), a video file, a folder or "
-                             "glob of images (`photos/*.jpg`), or a stream URL (`rtsp://...`, `http://...`)")
+    source: str = param("0", "a device index (`0`) or path (`/dev/video0`), a video file or its URL "
+                             "(`http://host/clip.mp4`), a folder or glob of images (`photos/*.jpg`), or "
+                             "a live stream URL (`rtsp://...`, `http://host/video.mjpg`)")
     rate_hz: float = param(0.0, "frames per second published; 0 = the source's own: a video's frame rate, "
                                 "a device's native rate, photos as fast as they load; can be changed live",
                            low=0, high=1000)

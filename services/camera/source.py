@@ -14,6 +14,7 @@ import math
 import os
 import threading
 import time
+import urllib.parse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -24,11 +25,20 @@ import numpy as np
 from balltrack.common.images import UnreadableImage, read_image
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".pnm"}
+# A URL whose path ends so names a video file that a server hands out whole (played at its frame
+# rate, to its end), not a live stream; MJPEG (.mjpg) and HLS (.m3u8, .ts) URLs stay live.
+VIDEO_SUFFIXES = {".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".mpg", ".mpeg", ".wmv", ".flv",
+                  ".ogv", ".3gp"}
+FILE_SCHEMES = {"http", "https", "ftp", "file"}
 # A video whose container does not say its frame rate is played at this rate.
 FALLBACK_VIDEO_RATE_HZ = 30.0
 # Reopening a lost live source waits this long first, doubling up to the maximum.
 RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 8.0
+
+# FFmpeg's own log line (``[tcp @ 0x...] Connection ... refused``) would come before our one-line
+# error; quiet unless the user asked for FFmpeg's log, and the error says how to.
+FFMPEG_QUIET = os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8") == "-8"
 
 try:  # OpenCV's own warnings (a device that is not there) would add lines to our one-line error
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
@@ -59,6 +69,9 @@ def parse_source(text: str) -> SourceSpec:
     if text.isdigit():
         return SourceSpec("device", int(text))
     if "://" in text:
+        url = urllib.parse.urlparse(text)
+        if url.scheme.lower() in FILE_SCHEMES and Path(url.path).suffix.lower() in VIDEO_SUFFIXES:
+            return SourceSpec("video", text)
         return SourceSpec("stream", text)
     if text.startswith("/dev/"):
         if not os.path.exists(text):
@@ -129,7 +142,9 @@ class Capture:
         self._capture = None
         self.native_rate: float | None = None
         if not self.open():
-            raise SourceError(f"source: cannot open {spec.kind} {spec.target}")
+            hint = (" (OPENCV_FFMPEG_LOGLEVEL=16 shows FFmpeg's reason)"
+                    if FFMPEG_QUIET and spec.kind in ("video", "stream") else "")
+            raise SourceError(f"source: cannot open {spec.kind} {spec.target}{hint}")
 
     def open(self) -> bool:
         """(Re)open; True once a first frame was read (kept for the next read)."""

@@ -1,6 +1,10 @@
 """The camera service as a real process over a real router: photos, a video, a calibration
 file, and the ways a source ends."""
 
+import functools
+import http.server
+import threading
+
 import cv2
 import numpy as np
 import pytest
@@ -107,6 +111,9 @@ def test_video_loops(session, launch, tmp_path):
     (("source=/dev/video99",), "camera: source: no such device /dev/video99"),
     (("source=97",), "camera: source: cannot open device 97"),
     (("source=BAD_VIDEO",), "camera: source: cannot open video "),
+    # (FFmpeg's own "[tcp @ 0x...] Connection refused" line is not printed before ours)
+    (("source=http://127.0.0.1:CLOSED_PORT/clip.mp4",), "camera: source: cannot open video http://"),
+    (("source=rtsp://127.0.0.1:CLOSED_PORT/cam",), "camera: source: cannot open stream rtsp://"),
     (("source=PHOTOS", "calibration=/nonexistent.yaml"), "camera: /nonexistent.yaml: cannot read"),
     # (photos none of which is an image: not "the end of the photos after 0 frames", status 0)
     (("source=NOT_IMAGES",), "camera: source: no file of NOT_IMAGES is an image OpenCV reads (2 tried; "),
@@ -122,7 +129,7 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
     not_images.mkdir()
     for name in ("a.jpg", "b.png"):
         (not_images / name).write_text("not an image")
-    replacements = {"BAD_VIDEO": str(bad_video), "PHOTOS": str(photos), "WRONG_SIZE": str(wrong_size),
+    replacements = {"CLOSED_PORT": str(free_port()), "BAD_VIDEO": str(bad_video), "PHOTOS": str(photos), "WRONG_SIZE": str(wrong_size),
                     "NOT_IMAGES": str(not_images)}
     arguments = []
     for override in overrides:
@@ -135,6 +142,10 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
     errors = [line for line in process.output().splitlines() if line.startswith("camera: ")]
     assert len(errors) == 1 and errors[0].startswith(expected), process.output()
     assert "Traceback" not in process.output()
+    # Besides it, only the service's own log lines (no FFmpeg "[tcp @ 0x...]" line).
+    others = [line for line in process.output().splitlines()
+              if line.strip() and line not in errors and " camera INFO " not in line]
+    assert not others, process.output()
 
 
 @pytest.mark.parametrize("name", ["camera+ros2_bridge", "ros2_bridge+camera"])
@@ -204,3 +215,26 @@ def test_a_new_frame_size_is_announced_before_its_frame(session, launch, tmp_pat
             assert (image["width"], image["height"]) == latest_size, image["header"]["seq"]
             checked += 1
     assert checked >= 10
+
+
+def test_a_video_served_over_http_plays_at_its_rate_to_its_end(session, router, tmp_path):
+    # A URL naming a video file is a video, not a live stream: paced at the file's 30 fps (a
+    # stream is sent as fast as it delivers) and ended with status 0 (a stream is reopened).
+    write_video(tmp_path / "clip.avi", 12)
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(tmp_path))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        images = Collector(session, "camera/image_raw", "Image")
+        url = f"http://127.0.0.1:{server.server_address[1]}/clip.avi"
+        process = start_service("camera", router.endpoint, tmp_path, "--set", f"source={url}")
+        assert process.popen.wait(60) == 0, process.output()
+        received = images.wait_count(12, 10)
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert [index_of(image_to_bgr(m)) for m in received] == [index % 5 for index in range(12)]
+    assert "end of video" in process.output()
+    stamps = [m["header"]["stamp"] for m in received]
+    # 11 intervals at 30 fps: 367 ms; unpaced, a 12-frame file is read in a few milliseconds.
+    assert (stamps[-1] - stamps[0]) / 1e9 > 0.3

@@ -20,6 +20,10 @@ def test_source_kinds(tmp_path):
     assert parse_source(" 2 ") == SourceSpec("device", 2)
     assert parse_source("rtsp://127.0.0.1:8554/cam").kind == "stream"
     assert parse_source("http://127.0.0.1/video.mjpg").live
+    # A video file a server hands out plays at its own rate and ends, as a local one does.
+    for url in ("http://127.0.0.1:8000/clips/run.MP4?token=1", "https://h/a.webm", "file:///tmp/a.avi"):
+        assert parse_source(url) == SourceSpec("video", url)
+    assert parse_source("http://127.0.0.1/live/index.m3u8").live
     for name in ("b.png", "a.jpg", "c.txt"):
         (tmp_path / name).write_bytes(b"x")
     assert parse_source(str(tmp_path)).paths == (str(tmp_path / "a.jpg"), str(tmp_path / "b.png"))
