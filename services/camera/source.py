@@ -105,19 +105,28 @@ class ImageFiles:
     def __init__(self, paths: tuple[str, ...]):
         self.paths = paths
         self.position = 0
-        self.unreadable = 0
+        # The files that could not be read when last tried: each is counted once however often
+        # ``loop`` comes back to it, and one written out since is no longer counted.
+        self._unreadable: set[str] = set()
         # "PATH: REASON" of the last file that could not be read (None: none so far)
         self.last_unreadable: str | None = None
+
+    @property
+    def unreadable(self) -> int:
+        return len(self._unreadable)
 
     def read(self) -> np.ndarray | None:
         while self.position < len(self.paths):
             path = self.paths[self.position]
             self.position += 1
             try:
-                return read_image(path)
+                image = read_image(path)
             except UnreadableImage as error:
-                self.unreadable += 1
+                self._unreadable.add(path)
                 self.last_unreadable = f"{path}: {error}"
+                continue
+            self._unreadable.discard(path)
+            return image
         return None
 
     def rewind(self) -> bool:

@@ -173,3 +173,17 @@ def test_looped_photos_keep_to_rate_hz_across_each_new_pass(tmp_path):
     # (one frame per 0.1 s, the passes back to back: a rewind used to cost a slot of its own)
     assert shown == [(0.0, 0), (0.1, 100), (0.2, 0), (0.3, 100), (0.4, 0), (0.5, 100)]
     assert feed.rewinds == 2
+
+
+def test_an_unreadable_photo_is_counted_once_across_passes_and_no_more_once_written(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((8, 8, 3), 50, np.uint8))
+    (tmp_path / "b.png").write_bytes(b"still being written")
+    spec = parse_source(str(tmp_path))
+    reader = ImageFiles(spec.paths)
+    for _ in range(3):  # three passes, as loop makes
+        assert reader.read() is not None and reader.read() is None
+        reader.rewind()
+    assert reader.unreadable == 1 and reader.last_unreadable.startswith(str(tmp_path / "b.png"))
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((8, 8, 3), 90, np.uint8))
+    assert reader.read() is not None and reader.read() is not None
+    assert reader.unreadable == 0
