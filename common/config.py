@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Iterable, TypeVar
 
 from balltrack.common.keys import SERVICES
+from balltrack.common.messages import shorten
 
 T = TypeVar("T")
 
@@ -285,13 +286,21 @@ def _coerce(key: str, annotation: Any, value: Any) -> Any:
                 raise ValueError(f"expected an integer, got {value!r}")
             if isinstance(value, float) and value.is_integer():
                 return int(value)
-            if isinstance(value, (int, str)):
-                return int(value)
-            raise ValueError(f"expected an integer, got {value!r}")
+            if isinstance(value, int):
+                return value
+            if isinstance(value, str):
+                try:
+                    return int(value)
+                except ValueError:
+                    pass
+            raise ValueError(f"expected an integer, got {shorten(value, 40)!r}")
         if annotation is float:
             if isinstance(value, bool):
                 raise ValueError(f"expected a number, got {value!r}")
-            number = float(value)
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"expected a number, got {shorten(value, 40)!r}") from None
             if not math.isfinite(number):
                 raise ValueError(f"must be finite, got {value!r}")
             return number

@@ -102,6 +102,17 @@ def test_wrong_types_are_refused_in_one_line_naming_the_field(cls, field, annota
         assert str(caught.value).startswith(f"{field.name}: ") and "\n" not in str(caught.value)
 
 
+@pytest.mark.parametrize("cls, field, annotation", every_field(
+    lambda field, annotation: annotation in (int, float)))
+def test_text_that_is_no_number_is_refused_as_what_was_expected(cls, field, annotation):
+    # (not Python's "invalid literal for int() with base 10")
+    expected = "an integer" if annotation is int else "a number"
+    for text in (["1.5", "abc", "", "[1]"] if annotation is int else ["abc", "", "1,5"]):
+        with pytest.raises(ConfigError) as caught:
+            load_config(cls, overrides=[f"{field.name}={text}"])
+        assert str(caught.value) == f"{field.name}: expected {expected}, got {text!r}"
+
+
 @pytest.mark.parametrize("cls, field, annotation", every_field(lambda field, annotation: is_choice(annotation)))
 def test_choices_round_trip_as_plain_strings(cls, field, annotation, tmp_path):
     choices = [member.value for member in annotation]
