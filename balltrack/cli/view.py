@@ -85,6 +85,12 @@ def _report(bridge) -> int:
 def command_view(args) -> int:
     if args.port is None:
         args.port = 8765 if args.foxglove else 9090
+    if args.host is not None and not args.foxglove:
+        # (one address or all: a --host that was quietly not kept would leave the viewer open
+        # to every network the host is on)
+        return _fail(args, "--host: Rerun's viewer serves on every interface (its Python API takes "
+                           "no address); --foxglove serves on one", 2)
+    args.host = args.host or "127.0.0.1"
     for option, port in (("--port", args.port), ("--grpc-port", args.grpc_port)):
         if not 0 <= port <= 65535 or (port == 0 and not args.foxglove):
             return _fail(args, f"{option}: {port} is not a TCP port (1-65535; 0, any free one, "
@@ -108,8 +114,9 @@ def register(commands) -> None:
     sub = networked(commands, "view", "watch the system live in Rerun or Foxglove", command_view)
     sub.add_argument("--foxglove", action="store_true",
                      help="serve the Foxglove WebSocket protocol (open it in the Foxglove app)")
-    sub.add_argument("--host", default="127.0.0.1",
-                     help="Foxglove: the address to serve on (default 127.0.0.1; 0.0.0.0 for other hosts)")
+    sub.add_argument("--host", default=None,
+                     help="Foxglove: the address to serve on (default 127.0.0.1; 0.0.0.0 for other "
+                          "hosts); Rerun serves on every interface")
     sub.add_argument("--port", type=int, default=None,
                      help="port to serve on (Rerun's web page: default 9090; Foxglove: 8765, 0 = any)")
     sub.add_argument("--grpc-port", type=int, default=9876,

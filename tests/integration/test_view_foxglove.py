@@ -151,6 +151,7 @@ def test_annotated_frame_reaches_a_foxglove_client(session, launch, viewer):
 @pytest.mark.parametrize("arguments, reason", [
     (["--port", "70000"], "--port: 70000 is not a TCP port"),
     (["--port", "0"], "--port: 0 is not a TCP port"),
+    (["--host", "127.0.0.1"], "--host: Rerun's viewer serves on every interface"),
 ])
 def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
     process = Process([sys.executable, "-m", "balltrack", "view", *arguments, "--connect", router.endpoint],
