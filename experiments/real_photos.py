@@ -29,6 +29,7 @@ numbers.
 """
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -329,6 +330,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     folders = []
     for folder in args.folders:
+        if os.path.isfile(folder):
+            # (a set is named by its folder; its labels.json given instead is its folder)
+            if os.path.basename(folder) != "labels.json":
+                print(f"{folder}: a file, not a folder of photos with a labels.json", file=sys.stderr)
+                return 2
+            folder = os.path.dirname(folder) or "."
         sets = photo_sets(folder)
         if not sets:
             print(f"{folder}: no labels.json there or in its subfolders (not a labelled photo set)",

@@ -64,6 +64,13 @@ def test_command_line_summary_and_bad_folder(tmp_path, capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 2 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
     assert real_photos.main([str(tmp_path / "missing")]) == 2
+    # A set's labels.json names its set; another file is refused as one.
+    capsys.readouterr()
+    assert real_photos.main([str(tmp_path / "drawn" / "labels.json"), "--summary", "--no-plain"]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[1].startswith("drawn")
+    photo = next((tmp_path / "drawn").glob("*.png"))
+    assert real_photos.main([str(photo), "--no-plain"]) == 2
+    assert capsys.readouterr().err.strip() == f"{photo}: a file, not a folder of photos with a labels.json"
 
 
 def test_a_set_whose_labels_name_no_image_or_are_not_json_is_one_line_and_status_2(tmp_path, capsys):
