@@ -23,6 +23,15 @@ def finite_number(name: str, value: Any) -> float:
     return number
 
 
+def requested_light(diffuse: Any, ambient: Any) -> tuple[tuple[float, float, float] | None, ...]:
+    """A set_light's ``(diffuse, ambient)``, each a checked level or None where not given;
+    ValueError for neither given or a bad level."""
+    if diffuse is None and ambient is None:
+        raise ValueError("set_light: give diffuse and/or ambient")
+    return tuple(None if value is None else light_level(name, value)
+                 for name, value in (("diffuse", diffuse), ("ambient", ambient)))
+
+
 def light_level(name: str, value: Any) -> tuple[float, float, float]:
     """A grey level or an [r, g, b] list, each in [0, 1]."""
     if isinstance(value, (list, tuple)):
@@ -62,11 +71,7 @@ def checked_form(request: Any) -> tuple[str, dict[str, Any]]:
     if op == "reset":
         scenario_name(arguments.get("scenario"))
     elif op == "set_light":
-        if arguments.get("diffuse") is None and arguments.get("ambient") is None:
-            raise ValueError("set_light: give diffuse and/or ambient")
-        for name in ("diffuse", "ambient"):
-            if arguments.get(name) is not None:
-                light_level(name, arguments[name])
+        requested_light(arguments.get("diffuse"), arguments.get("ambient"))
     elif op == "place_ball":
         if arguments.get("id") is None:
             raise ValueError("place_ball: missing 'id'")

@@ -48,7 +48,7 @@ from balltrack.services.simulator.requests import (  # noqa: E402
     ball_position,
     checked_form,
     finite_number,
-    light_level,
+    requested_light,
     robot_position,
     scenario_name,
 )
@@ -357,13 +357,12 @@ class Simulation:
     @_locked
     def set_light(self, diffuse: Any = None, ambient: Any = None) -> None:
         """Set the main light's diffuse and/or the ambient level: a grey level or [r, g, b]."""
-        if diffuse is None and ambient is None:
-            raise ValueError("set_light: give diffuse and/or ambient")
+        new_diffuse, new_ambient = requested_light(diffuse, ambient)
         model = self._model
-        new_diffuse = (light_level("diffuse", diffuse) if diffuse is not None
-                       else tuple(float(value) for value in model.light_diffuse[self._light_id]))
-        new_ambient = (light_level("ambient", ambient) if ambient is not None
-                       else tuple(float(value) for value in model.light_ambient[self._light_id]))
+        if new_diffuse is None:
+            new_diffuse = tuple(float(value) for value in model.light_diffuse[self._light_id])
+        if new_ambient is None:
+            new_ambient = tuple(float(value) for value in model.light_ambient[self._light_id])
         self._apply_light(new_diffuse, new_ambient)
 
     def _apply_light(self, diffuse, ambient) -> None:
