@@ -48,20 +48,37 @@ class Graph:
             graph.declared[parts[3]]["/".join(parts[4:])] |= zids
         return graph
 
-    def names(self, keys: Keys) -> dict[str, list[str]]:
-        """Zenoh id -> the services of that session (sorted), from the ``alive/<service>``
-        tokens: several for services joined in one process (``balltrack run a+b``)."""
-        result: dict[str, set[str]] = defaultdict(set)
+    def _tokens(self) -> list[tuple[str, str, set[str]]]:
+        """(namespace, service, zids) of every ``[<namespace>/]alive/<service>`` token."""
+        found = []
         for key, zids in self.declared["token"].items():
-            stripped = keys.strip(key)
-            if stripped.startswith("alive/"):
-                for zid in zids:
-                    result[zid].add(stripped.split("/", 1)[1])
+            namespace, separator, service = ("/" + key).rpartition("/alive/")
+            if separator and service and "/" not in service:
+                found.append((namespace.lstrip("/"), service, zids))
+        return found
+
+    def names(self) -> dict[str, list[str]]:
+        """Zenoh id -> the services of that session (sorted), from the ``alive/<service>``
+        tokens of any namespace: several for services joined in one process
+        (``balltrack run a+b``)."""
+        result: dict[str, set[str]] = defaultdict(set)
+        for _, service, zids in self._tokens():
+            for zid in zids:
+                result[zid].add(service)
         return {zid: sorted(services) for zid, services in result.items()}
 
+    def keys_of(self, full_key: str, keys: Keys) -> Keys:
+        """The namespace ``full_key`` is in: ``keys``' own, or (listed from the root) the
+        longest of the live services' namespaces it starts with, so that ``robot1/cmd_vel``
+        is typed and attributed as ``cmd_vel`` is."""
+        namespaces = {namespace for namespace, _, _ in self._tokens()} | {keys.namespace}
+        within = [namespace for namespace in namespaces
+                  if namespace and full_key.startswith(namespace + "/")]
+        return Keys(max(within, key=len)) if within else keys
+
     def who(self, kind: str, full_key: str, keys: Keys) -> list[str]:
-        names = self.names(keys)
-        key = keys.strip(full_key)
+        names = self.names()
+        key = self.keys_of(full_key, keys).strip(full_key)
         return sorted(_holder(kind, key, names[zid]) if zid in names else zid[:8]
                       for zid in self.declared[kind].get(full_key, ()))
 
@@ -141,7 +158,7 @@ def command_topic_list(args) -> int:
     for key in sorted(live):
         publishers = ",".join(graph.who("publisher", key, keys)) or "-"
         subscribers = ",".join(graph.who("subscriber", key, keys)) or "-"
-        if not out.line(f"{keys.strip(key):<28} {_message_type(keys, key):<12} "
+        if not out.line(f"{keys.strip(key):<28} {_message_type(graph.keys_of(key, keys), key):<12} "
                         f"{rate(traffic.get(key, [])):>8.2f} {publishers:<24} {subscribers}"):
             break
     if out.closed:
@@ -156,7 +173,8 @@ def command_topic_info(args) -> int:
     keys, graph, traffic = snapshot
     full_key = keys(args.key)
     samples = traffic.get(full_key, [])
-    spec = next((spec for spec in key_table.TABLE if spec.key == args.key), None)
+    table_key = graph.keys_of(full_key, keys).strip(full_key)  # (robot1/cmd_vel is cmd_vel)
+    spec = next((spec for spec in key_table.TABLE if spec.key == table_key), None)
     publishers = graph.who("publisher", full_key, keys) if graph.readable else None
     subscribers = graph.who("subscriber", full_key, keys) if graph.readable else None
     if spec is None and not samples and not publishers and not subscribers:
@@ -167,7 +185,7 @@ def command_topic_info(args) -> int:
     sizes = [size for _, size in samples]
     info = {
         "key": full_key,
-        "type": _message_type(keys, full_key),
+        "type": _message_type(graph.keys_of(full_key, keys), full_key),
         "declared_publisher": spec.publisher if spec else None,
         "when": spec.when if spec else None,
         "publishers": publishers,

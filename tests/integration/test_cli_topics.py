@@ -10,7 +10,7 @@ import time
 import pytest
 
 from balltrack.common.messages import encode, header
-from tests.harness import Collector, process_environment
+from tests.harness import Collector, process_environment, start_service, wait_until
 from tests.integration.test_pipeline import CAMERA_INFO
 
 PUBLISH_HZ = 20.0
@@ -152,3 +152,26 @@ def test_config_dump_then_load_restores_parameters(router, locator, tmp_path):
     binary = balltrack("config", "load", "locator", str(tmp_path / "binary.yaml"))
     assert binary.returncode == 2
     assert binary.stderr == f"balltrack config: {tmp_path / 'binary.yaml'}: not YAML (not UTF-8 text)\n"
+
+
+def test_topic_list_from_the_root_types_and_names_other_namespaces_keys(router, log_dir):
+    # (as `ros2 topic list` shows /robot1/cmd_vel: its type, and the follower, not a session id)
+    robot = start_service("locator+follower", router.endpoint, log_dir, "--namespace", "robot1")
+    try:
+        def rows():
+            listed = balltrack("topic", "list", "--connect", router.endpoint, "--window", "1.5")
+            assert listed.returncode == 0, listed.stderr
+            return {line.split()[0]: line.split() for line in listed.stdout.splitlines()[1:]}
+
+        def named(table):  # (its liveliness token may reach the router after its publishers)
+            row = table.get("robot1/cmd_vel", [])
+            return table if row[1:2] + row[3:4] == ["Twist", "follower"] else None
+
+        found = wait_until(lambda: named(rows()), 60, "robot1/cmd_vel listed as the follower's Twist",
+                           robot, every=0.1)
+        assert found["robot1/locator/stats"][1] == "Stats" and found["robot1/locator/stats"][3] == "locator"
+        info = json.loads(balltrack("topic", "info", "robot1/cmd_vel", "--connect", router.endpoint,
+                                    "--window", "0.5").stdout)
+        assert (info["type"], info["declared_publisher"], info["publishers"]) == ("Twist", "follower", ["follower"])
+    finally:
+        assert robot.stop() == 0, robot.output()
