@@ -34,9 +34,9 @@ class LocatorConfig:
     h_fov: float = param(1.089, "horizontal field of view (rad), used by the faithful model without "
                                 "CameraInfo", above=0, below=math.pi)
     ball_radius: float = param(0.033, "the ball's real radius (m); 0.033 = a tennis ball", above=0)
-    mode: LocatorMode = param(LocatorMode.auto, "`exact` (pinhole, needs CameraInfo), `faithful` (the "
-                                                "paper's equations 1-8) or `auto` (exact once CameraInfo "
-                                                "was seen)")
+    mode: LocatorMode = param(LocatorMode.auto, "`exact` (pinhole; a detection of a frame size without "
+                                                "CameraInfo is rejected), `faithful` (the paper's "
+                                                "equations 1-8) or `auto` (exact once CameraInfo was seen)")
     circle_model: CircleModel = param(CircleModel.mean, "what the detector's circle measures of the "
                                                         "ball's elliptic silhouette: `mean` (best-fit "
                                                         "circle), `area` (equal-area circle) or "

@@ -44,13 +44,18 @@ def build(service: ServiceContext):
         width, height = ball["image_width"], ball["image_height"]
         intrinsics = cameras.get((width, height))
         matches = intrinsics is not None
+        if config.resolved_mode(matches) == "exact" and not matches:
+            # (asked for the pinhole model: the paper's approximation, quietly, is not it)
+            raise MessageError(f"mode exact: no CameraInfo for {width}x{height} frames yet")
         try:
-            if config.resolved_mode(matches) == "exact" and matches:
+            if config.resolved_mode(matches) == "exact":
                 position = locate_exact(ball["u"], ball["v"], ball["radius_px"], intrinsics,
                                         config.ball_radius, config.circle_model)
             else:
+                # The camera's fields of view where it told them, else the configured h_fov.
+                h_fov = intrinsics.h_fov if matches else config.h_fov
                 v_fov = intrinsics.v_fov if matches else faithful_v_fov(config.h_fov, width, height)
-                position = locate_faithful(ball["x"], ball["y"], ball["z"], config.h_fov, v_fov,
+                position = locate_faithful(ball["x"], ball["y"], ball["z"], h_fov, v_fov,
                                            config.ball_radius)
         except (ValueError, ZeroDivisionError) as error:
             raise MessageError(f"cannot locate: {error}") from None

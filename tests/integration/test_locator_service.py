@@ -121,3 +121,29 @@ def test_each_frame_size_is_located_with_its_own_camera_info(session, locator):
     put_until(put, output, both_exact, 40, 0.1, "both sizes located exactly")
     for position in output.messages[-2:]:
         assert math.dist((position["x"], position["y"], position["z"]), point) < 0.005 * truth
+
+
+def test_exact_mode_rejects_a_size_without_camera_info_and_faithful_uses_the_cameras_fov(session, launch):
+    launch("locator", "mode=exact")
+    output = Collector(session, "detected_ball_3d", "Ball3D")
+    stats = Collector(session, "locator/stats", "Stats")
+    narrow = Intrinsics.from_fov(WIDTH, HEIGHT, 0.62)
+    put_until(lambda attempt: session.put("detected_ball", encode(
+                  "Ball2D", ball_message((0.0, 0.0, 1.0), attempt, intrinsics=narrow))),
+              stats, lambda m: m and m[-1]["rejected"] >= 1, 20, 0.5, "a rejected detection")
+    assert not output.messages  # not located with the faithful model instead
+
+    def put(attempt):
+        session.put("camera/camera_info", encode("CameraInfo", camera_info(narrow)))
+        session.put("detected_ball", encode("Ball2D", ball_message((0.0, 0.0, 1.0), 100 + attempt,
+                                                                   intrinsics=narrow)))
+
+    put_until(put, output, lambda m: m, 20, 0.1, "a located ball once CameraInfo came")
+    assert abs(output.messages[-1]["distance"] - 1.0) < 0.005
+    # Faithful with CameraInfo: the camera's 0.62 rad, not the configured 1.089.
+    assert query_config(session, "locator", {"mode": "faithful"})["ok"]
+    message = ball_message((0.0, 0.0, 1.0), 500, intrinsics=narrow)
+    start = len(output.messages)
+    session.put("detected_ball", encode("Ball2D", message))
+    position = output.wait_for(lambda m: m[start:], 10, "a faithful position")[0]
+    assert abs(position["distance"] - 0.033 / math.tan(message["z"] * narrow.h_fov / 2)) < 1e-9
