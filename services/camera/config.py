@@ -10,6 +10,7 @@ Example ``camera.toml``::
 """
 
 import enum
+import math
 from dataclasses import dataclass
 
 from balltrack.common.config import ConfigError, check_fields, param
@@ -47,7 +48,7 @@ class CameraConfig:
                                  "distortion); empty = an ideal pinhole with `hfov`")
     # The simulator's camera and the paper's have 1.089 rad.
     hfov: float = param(1.089, "horizontal field of view (rad) of the ideal pinhole used without a "
-                               "calibration file", above=0, below=3.1415)
+                               "calibration file", above=0, below=math.pi)
 
     def __post_init__(self) -> None:
         check_fields(self)
