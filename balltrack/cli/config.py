@@ -112,6 +112,6 @@ def register(commands) -> None:
     config = networked(commands, "config", "read, change, dump or load a service's parameters live",
                        command_config)
     config.add_argument("target", metavar="SERVICE|dump|load")
-    config.add_argument("rest", nargs="*", metavar="KEY=VALUE | SERVICE [FILE]")
+    config.add_argument("rest", nargs="*", default=[], metavar="KEY=VALUE | SERVICE [FILE]")
     config.add_argument("--describe", action="store_true",
                         help="print every parameter's type, default, bounds or choices and meaning")

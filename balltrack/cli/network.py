@@ -217,5 +217,5 @@ def register(commands) -> None:
     sim = networked(commands, "sim", "control the simulator: reset, set_light, place_ball, "
                     "place_robot", command_sim)
     sim.add_argument("op", choices=SIM_OPS)
-    sim.add_argument("arguments", nargs="*", metavar="KEY=VALUE",
+    sim.add_argument("arguments", nargs="*", default=[], metavar="KEY=VALUE",
                      help="e.g. diffuse=0.1, id=tennis position=1.5,0.2, scenario=search")

@@ -88,3 +88,14 @@ def test_an_unknown_option_among_trailing_values_is_still_refused(capsys):
     with pytest.raises(SystemExit):
         parser.parse_args(["locator", "--connect", "x", "a=1", "--bogus", "b=2"])
     assert capsys.readouterr().err.strip() == "tool: unrecognized arguments: --bogus"
+
+
+@pytest.mark.parametrize("argv, required", [(["sim"], "op"), (["config"], "SERVICE|dump|load")])
+def test_only_what_is_required_is_named_as_required(capsys, argv, required):
+    # (KEY=VALUE may be left out: `balltrack sim reset`, `balltrack config locator`)
+    from balltrack.cli import build_parser
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args(argv)
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip() == (f"balltrack {argv[0]}: the following arguments are "
+                                               f"required: {required}")
