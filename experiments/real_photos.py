@@ -330,6 +330,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     folders = []
     for folder in args.folders:
+        if not os.path.exists(folder):
+            print(f"{folder}: no such file or folder", file=sys.stderr)
+            return 2
         if os.path.isfile(folder):
             # (a set is named by its folder; its labels.json given instead is its folder)
             if os.path.basename(folder) != "labels.json":

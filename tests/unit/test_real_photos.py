@@ -64,6 +64,7 @@ def test_command_line_summary_and_bad_folder(tmp_path, capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 2 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
     assert real_photos.main([str(tmp_path / "missing")]) == 2
+    assert capsys.readouterr().err.strip() == f"{tmp_path / 'missing'}: no such file or folder"
     # A set's labels.json names its set; another file is refused as one.
     capsys.readouterr()
     assert real_photos.main([str(tmp_path / "drawn" / "labels.json"), "--summary", "--no-plain"]) == 0
