@@ -141,6 +141,10 @@ def _run_folder_status_code(result: dict) -> int:
 def command_status(args) -> int:
     if args.run_dir:
         return _run_folder_status(args)
+    for option, given in (("--json", args.json), ("--no-network", args.no_network)):
+        if given:  # (ignored, a script would read the table as JSON, or wait on a router)
+            print(f"balltrack status: {option}: only with --run-dir", file=sys.stderr)
+            return 2
     session = open_or_report(args)
     if session is None:
         return 1

@@ -143,6 +143,8 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["deploy", "start", "--wait", "-1"], "--wait: must be at least 0"),
     (["deploy", "stop", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["sim", "explode"], "invalid choice"),
+    (["status", "--json"], "balltrack status: --json: only with --run-dir"),
+    (["status", "--no-network"], "balltrack status: --no-network: only with --run-dir"),
     # (refused before any router is asked: nothing listens at the default endpoint here)
     (["sim", "set_light", "diffuse=bright"], "balltrack sim: diffuse: expected a number, got 'bright'"),
     (["sim", "place_robot", "x=1"], "balltrack sim: place_robot: 'x' and 'y' are required"),
