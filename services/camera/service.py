@@ -11,7 +11,8 @@ answered as a query, as the simulator does. Stats add ``frames``, ``disconnects`
 
 A source that cannot be opened (photos none of which OpenCV reads too), or a calibration file
 that cannot be read or does not fit the frames, is one line on stderr and exit status 2. The end
-of a video or of the photos exits 0 (``loop`` starts them again); a device or stream that
+of a video or of the photos exits 0 (``loop`` starts them again; a video that ends well before
+the frame count its container states is warned of: damaged); a device or stream that
 disappears is reopened with backoff.
 
 Example:

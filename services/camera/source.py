@@ -150,6 +150,7 @@ class Capture:
         self._pending: np.ndarray | None = None
         self._capture = None
         self.native_rate: float | None = None
+        self.stated_frames: int | None = None  # a video's frame count, as its container states it
         if not self.open():
             hint = (" (OPENCV_FFMPEG_LOGLEVEL=16 shows FFmpeg's reason)"
                     if FFMPEG_QUIET and spec.kind in ("video", "stream") else "")
@@ -172,6 +173,8 @@ class Capture:
             return False
         rate = capture.get(cv2.CAP_PROP_FPS)
         self.native_rate = rate if math.isfinite(rate) and 0.0 < rate <= 1000.0 else None
+        count = capture.get(cv2.CAP_PROP_FRAME_COUNT)
+        self.stated_frames = int(count) if math.isfinite(count) and count > 0 else None
         self._capture, self._pending = capture, image
         return True
 
@@ -282,6 +285,15 @@ class FrameFeed:
             delay = min(2.0 * delay, RETRY_MAX_S)
         return False
 
+    def _check_pass(self) -> None:
+        """Warn when a video ended well before the frame count its container states: a
+        damaged file ends as if it were whole (OpenCV's read just fails), which a user would
+        take for the end of the recording. (A stated count may be an estimate: 5% slack.)"""
+        stated = getattr(self.reader, "stated_frames", None)
+        if self.log and self.spec.kind == "video" and stated and self._since_rewind < 0.95 * stated - 1:
+            self.log.warning("video %s: %d of the %d frames its container states could be read; "
+                             "the rest is damaged or missing", self.spec.target, self._since_rewind, stated)
+
     def __iter__(self) -> Iterator[np.ndarray]:
         while not self.stop.is_set():
             if not self.reader.live:
@@ -290,6 +302,8 @@ class FrameFeed:
                     return
             image = self.reader.read()
             # (A pass without one readable frame would loop forever: that ends too.)
+            if image is None and not self.reader.live:
+                self._check_pass()
             if (image is None and not self.reader.live and self.settings().loop and self._since_rewind
                     and self.reader.rewind()):
                 # The slot booked above is the next pass's first frame's: booking another for it

@@ -5,6 +5,7 @@ frames come from a script (it stands for cv2.VideoCapture of a device that vanis
 back); everything else runs on real files.
 """
 
+import logging
 import threading
 
 import cv2
@@ -187,3 +188,29 @@ def test_an_unreadable_photo_is_counted_once_across_passes_and_no_more_once_writ
     cv2.imwrite(str(tmp_path / "b.png"), np.full((8, 8, 3), 90, np.uint8))
     assert reader.read() is not None and reader.read() is not None
     assert reader.unreadable == 0
+
+
+def test_a_video_damaged_midway_is_warned_of_at_its_end_and_a_whole_one_is_not(tmp_path, caplog):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48))
+    for index in range(20):
+        noise = np.random.default_rng(index).integers(0, 255, (48, 64, 3), dtype=np.uint8)
+        writer.write(noise)  # (noise: frames of similar, incompressible size)
+    writer.release()
+    whole = path.read_bytes()
+    damaged = tmp_path / "damaged.avi"
+    middle = len(whole) // 3
+    damaged.write_bytes(whole[:middle] + bytes(len(whole) - middle))
+    logger = logging.getLogger("camera-test")
+    for video, warned in ((path, False), (damaged, True)):
+        caplog.clear()
+        spec = parse_source(str(video))
+        feed = FrameFeed(spec, Capture(spec), lambda: CameraConfig(source=str(video), rate_hz=1000.0),
+                         threading.Event(), logger)
+        frames = len(list(feed))
+        assert feed.ended and (frames < 20) == warned, frames
+        messages = [record.getMessage() for record in caplog.records if record.levelno == logging.WARNING]
+        assert bool(messages) == warned, messages
+        if warned:
+            assert messages == [f"video {damaged}: {frames} of the 20 frames its container states could "
+                                "be read; the rest is damaged or missing"]
