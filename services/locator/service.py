@@ -1,8 +1,9 @@
 """Locator service: ``detected_ball`` -> ``detected_ball_3d`` (paper section 2.3).
 
 Subscribes: ``detected_ball`` (Ball2D), ``camera/camera_info`` (CameraInfo, also queried once
-at start; kept per frame size, and a detection is located with its own frame size's). Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header copied from
-the detection so end-to-end latency stays measurable).
+at start; kept per frame size, and a detection is located with its own frame size's).
+Publishes: ``detected_ball_3d`` (Ball3D, camera optical frame, header copied from the detection
+so end-to-end latency stays measurable).
 
 Example:
     balltrack run locator --connect tcp/192.168.1.10:7447 --set ball_radius=0.033 --set mode=auto
