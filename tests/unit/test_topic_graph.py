@@ -25,7 +25,7 @@ def test_the_services_of_a_joined_process_are_told_apart_by_the_key():
                       "robot1/camera/image_raw": {ALONE}, "robot1/sim/ground_truth": {"cccccccccccc"}},
         "subscriber": {"robot1/camera/image_raw": {JOINED}, "robot1/cmd_vel": {ALONE}},
     })
-    assert graph.names(keys) == {JOINED: ["detector", "follower", "locator"], ALONE: ["simulator"]}
+    assert graph.names() == {JOINED: ["detector", "follower", "locator"], ALONE: ["simulator"]}
     # (each of the process's keys was credited to one of its services, whichever token came last)
     assert graph.who("publisher", "robot1/detected_ball_3d", keys) == ["locator"]
     assert graph.who("publisher", "robot1/cmd_vel", keys) == ["follower"]
@@ -37,3 +37,8 @@ def test_the_services_of_a_joined_process_are_told_apart_by_the_key():
     assert graph.who("subscriber", "robot1/cmd_vel", keys) == ["simulator"]
     # a session with no token: its Zenoh id, shortened
     assert graph.who("publisher", "robot1/sim/ground_truth", keys) == ["cccccccc"]
+    # Listed from the root, the same keys: in robot1's namespace, as robot1 lists them.
+    root = Keys("")
+    assert graph.keys_of("robot1/cmd_vel", root).namespace == "robot1"
+    assert graph.who("publisher", "robot1/cmd_vel", root) == ["follower"]
+    assert graph.keys_of("cmd_vel", root).namespace == "" and graph.keys_of("other/x", root).namespace == ""
