@@ -28,9 +28,9 @@ from balltrack.common.arguments import ArgumentParser, number
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
 from balltrack.common.network import port_taken
-from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session, config_endpoints,
-                                      default_endpoints, load_config_file, router_config,
-                                      secure_client_path, secure_router_path)
+from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
+                                      config_endpoints, default_endpoints, load_config_file,
+                                      router_config, secure_client_path, secure_router_path)
 from balltrack.common.status import service_status
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,

@@ -5,9 +5,9 @@ of the read, seq = frame index from 0, frame_id "camera") and ``camera/camera_in
 (CameraInfo, intrinsics from ``calibration`` or the ideal pinhole of ``hfov``, with the
 distortion model) with the first frame, with each frame whose size differs from the one before,
 and then once a second; ``camera/camera_info`` is also answered as a query, as the simulator
-does. Stats add ``frames``, ``disconnects`` and
-``reconnects`` (a live source that stopped delivering and was reopened), ``skipped_frames``
-(live frames left out to keep to ``rate_hz``), ``rewinds`` and ``unreadable_files``.
+does. Stats add ``frames``, ``disconnects`` and ``reconnects`` (a live source that stopped
+delivering and was reopened), ``skipped_frames`` (live frames left out to keep to ``rate_hz``),
+``rewinds`` and ``unreadable_files``.
 
 A source that cannot be opened (photos none of which OpenCV reads too), or a calibration file
 that cannot be read or does not fit the frames, is one line on stderr and exit status 2. The end

@@ -101,6 +101,7 @@ class ImageFiles:
 
     live = False
     native_rate = None
+    stated_frames = None
 
     def __init__(self, paths: tuple[str, ...]):
         self.paths = paths
@@ -289,7 +290,7 @@ class FrameFeed:
         """Warn when a video ended well before the frame count its container states: a
         damaged file ends as if it were whole (OpenCV's read just fails), which a user would
         take for the end of the recording. (A stated count may be an estimate: 5% slack.)"""
-        stated = getattr(self.reader, "stated_frames", None)
+        stated = self.reader.stated_frames
         if self.log and self.spec.kind == "video" and stated and self._since_rewind < 0.95 * stated - 1:
             self.log.warning("video %s: %d of the %d frames its container states could be read; "
                              "the rest is damaged or missing", self.spec.target, self._since_rewind, stated)

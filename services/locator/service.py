@@ -45,11 +45,12 @@ def build(service: ServiceContext):
         width, height = ball["image_width"], ball["image_height"]
         intrinsics = cameras.get((width, height))
         matches = intrinsics is not None
-        if config.resolved_mode(matches) == "exact" and not matches:
+        exact = config.resolved_mode(matches) == "exact"
+        if exact and not matches:
             # (asked for the pinhole model: the paper's approximation, quietly, is not it)
             raise MessageError(f"mode exact: no CameraInfo for {width}x{height} frames yet")
         try:
-            if config.resolved_mode(matches) == "exact":
+            if exact:
                 position = locate_exact(ball["u"], ball["v"], ball["radius_px"], intrinsics,
                                         config.ball_radius, config.circle_model)
             else:
