@@ -22,6 +22,8 @@ Example:
 
 import time
 
+import zenoh
+
 from balltrack.common import keys
 from balltrack.common.config import ConfigError
 from balltrack.common.images import bgr_to_message
@@ -45,7 +47,11 @@ def build(service: ServiceContext):
     # Each frame's message is a new megabyte or more: kept, not faulted in again (common/memory.py).
     keep_freed_memory()
     images = service.publisher(keys.IMAGE_RAW, "Image")
-    infos = service.publisher(keys.CAMERA_INFO, "CameraInfo")
+    # Frames may be dropped when the link is congested (a late frame is worth less than the
+    # next), but not the camera model that comes before a new frame size: a locator without it
+    # locates that size's detections with the wrong intrinsics until the next one, a second on.
+    infos = service.publisher(keys.CAMERA_INFO, "CameraInfo",
+                              congestion_control=zenoh.CongestionControl.BLOCK)
     feed = FrameFeed(spec, reader, lambda: service.config, service.stop, service.log)
     models: dict[tuple[int, int], CameraModel] = {}
     latest: dict[str, dict] = {}
