@@ -58,13 +58,16 @@ class CameraConfig:
             raise ConfigError(f"width/height: give both or neither, got {self.width}x{self.height}")
 
     def preflight(self) -> None:
-        """The source names something that exists and the calibration file reads (see
-        ``common.runner.preflight``); the service opens both again when it starts."""
+        """The source names something that exists, one of its photos reads when it names
+        photos, and the calibration file reads (see ``common.runner.preflight``); the service
+        opens both again when it starts (a device or stream only then)."""
         from balltrack.services.camera.calibration import read_calibration
-        from balltrack.services.camera.source import SourceError, parse_source
+        from balltrack.services.camera.source import SourceError, open_photos, parse_source
 
         try:
-            parse_source(self.source)
+            spec = parse_source(self.source)
+            if spec.kind == "images":
+                open_photos(spec)
             if self.calibration:
                 read_calibration(self.calibration)
         except (SourceError, ValueError) as error:

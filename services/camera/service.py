@@ -105,9 +105,6 @@ def build(service: ServiceContext):
         finally:
             reader.close()
         if feed.ended:
-            if not feed.frames and reader.unreadable:  # (not the end of the photos: none was one)
-                raise ConfigError(f"source: no file of {spec.target} is an image OpenCV reads "
-                                  f"({reader.unreadable} tried; {reader.last_unreadable})")
             files = f"{reader.unreadable} unreadable file{'s' if reader.unreadable > 1 else ''}"
             context.log.info("end of %s %s after %d frames%s", spec.kind, spec.target, feed.frames,
                              f" ({files}, left out)" if reader.unreadable else "")

@@ -111,12 +111,22 @@ class ImageFiles:
         self._unreadable: set[str] = set()
         # "PATH: REASON" of the last file that could not be read (None: none so far)
         self.last_unreadable: str | None = None
+        self._pending: np.ndarray | None = None  # read ahead by ``open``
+
+    def open(self) -> bool:
+        """Read ahead to the first photo OpenCV reads, kept for the next ``read``; False when
+        none does (a folder of files still being written, or of files that are not images)."""
+        self._pending = self.read()
+        return self._pending is not None
 
     @property
     def unreadable(self) -> int:
         return len(self._unreadable)
 
     def read(self) -> np.ndarray | None:
+        if self._pending is not None:
+            image, self._pending = self._pending, None
+            return image
         while self.position < len(self.paths):
             path = self.paths[self.position]
             self.position += 1
@@ -131,7 +141,7 @@ class ImageFiles:
         return None
 
     def rewind(self) -> bool:
-        self.position = 0
+        self.position, self._pending = 0, None
         return True
 
     def close(self) -> None:
@@ -202,8 +212,18 @@ class Capture:
 def open_source(text: str, width: int = 0, height: int = 0) -> tuple[SourceSpec, ImageFiles | Capture]:
     spec = parse_source(text)
     if spec.kind == "images":
-        return spec, ImageFiles(spec.paths)
+        return spec, open_photos(spec)
     return spec, Capture(spec, width, height)
+
+
+def open_photos(spec: SourceSpec) -> ImageFiles:
+    """The photos of ``spec``, the first that OpenCV reads already read; SourceError when none
+    does."""
+    photos = ImageFiles(spec.paths)
+    if not photos.open():
+        raise SourceError(f"source: no file of {spec.target} is an image OpenCV reads "
+                          f"({photos.unreadable} tried; {photos.last_unreadable})")
+    return photos
 
 
 class Pacer:

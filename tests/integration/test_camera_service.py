@@ -149,29 +149,37 @@ def test_bad_source_or_calibration_exits_2_with_one_line(session, router, tmp_pa
 
 
 @pytest.mark.parametrize("name", ["camera+ros2_bridge", "ros2_bridge+camera"])
-def test_a_refused_source_stops_a_process_of_several_services_whichever_loop_it_is(router, tmp_path, name):
+def test_a_refused_source_stops_a_process_of_several_services_whichever_loop_it_is(router, tmp_path, photos, name):
     # (the first service's loop runs in a thread of its own: what it refused was a traceback
-    # there, and the process went on without its camera)
+    # there, and the process went on without its camera; a calibration is checked against the
+    # frames only once they come)
     pytest.importorskip("rosbags")
-    not_images = tmp_path / "not_images"
-    not_images.mkdir()
-    (not_images / "a.jpg").write_text("not an image")
-    process = start_service(name, router.endpoint, tmp_path, "--set", f"camera.source={not_images}")
+    wrong_size = tmp_path / "wide.yaml"
+    write_calibration(wrong_size, CameraModel(640, 360, 500.0, 500.0, 320.0, 180.0))
+    process = start_service(name, router.endpoint, tmp_path, "--set", f"camera.source={photos}",
+                            "--set", f"camera.calibration={wrong_size}")
     assert process.popen.wait(60) == 2, process.output()
     errors = [line for line in process.output().splitlines() if line.startswith(f"{name}: ")]
-    assert errors == [f"{name}: source: no file of {not_images} is an image OpenCV reads (1 tried; "
-                      f"{not_images / 'a.jpg'}: not an image OpenCV decodes)"], process.output()
+    assert len(errors) == 1 and errors[0].startswith(f"{name}: calibration: calibration is for 640x360"), \
+        process.output()
     assert "Traceback" not in process.output()
 
 
 @pytest.mark.parametrize("name, overrides, expected", [
     ("camera", ("source=/nonexistent/clip.mp4",), "camera: source: no such file, folder, device or URL"),
     ("camera", ("calibration=/nonexistent.yaml",), "camera: /nonexistent.yaml: cannot read"),
+    # (photos none of which is an image: found out before a router answers, nor logged as running)
+    ("camera", ("source=NOT_IMAGES",), "camera: source: no file of NOT_IMAGES is an image OpenCV reads (1 tried; "),
     # (of several services, which one it is for)
     ("camera+detector", ("camera.source=/nonexistent/clip.mp4",), "camera+detector: camera: source: no such file"),
 ])
 def test_a_missing_file_exits_2_before_a_router_answers(tmp_path, name, overrides, expected):
     # Nobody listens there: a service waits for its router, but not to report a typo in a path.
+    not_images = tmp_path / "not_images"
+    not_images.mkdir()
+    (not_images / "a.jpg").write_text("not an image")
+    overrides = [override.replace("NOT_IMAGES", str(not_images)) for override in overrides]
+    expected = expected.replace("NOT_IMAGES", str(not_images))
     arguments = [item for override in overrides for item in ("--set", override)]
     process = start_service(name, f"tcp/127.0.0.1:{free_port()}", tmp_path, *arguments)
     assert process.popen.wait(60) == 2, process.output()
