@@ -12,6 +12,17 @@ from balltrack.common.messages import MessageError, decode
 EMPTY_RETRIES = 3
 
 
+# The figures every service's Stats has; ``other_figures`` shows what a service adds to them.
+COMMON_FIELDS = ("service", "stamp", "received", "published", "rejected", "dropped", "p50_ms", "p99_ms")
+
+
+def other_figures(stats: dict) -> str:
+    """A service's own figures, those past COMMON_FIELDS (the camera's frames and unreadable
+    files, the simulator's real-time factor), as ``name=value`` in the order it sent them."""
+    return " ".join(f"{name}={value:.4g}" if isinstance(value, float) else f"{name}={value}"
+                    for name, value in stats.items() if name not in COMMON_FIELDS)
+
+
 def liveliness_keys(session, key_expression: str, timeout: float) -> set[str]:
     """The keys of the liveliness tokens alive under ``key_expression``."""
     for _ in range(EMPTY_RETRIES):

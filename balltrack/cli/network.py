@@ -11,7 +11,7 @@ from balltrack.common.messages import SIM_OPS
 from balltrack.common.session import (DEFAULT_PORT, ZenohConfigError, config_endpoints, router_config,
                                       secure_router_path, zenoh_reason)
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.common.status import service_status
+from balltrack.common.status import other_figures, service_status
 
 
 def command_router(args) -> int:
@@ -109,13 +109,14 @@ def _run_folder_status(args) -> int:
     # (a process of joined services is named after all of them: detector+locator+follower)
     width = max([12, *(len(name) for name in result["children"])])
     print(f"{'name':<{width}} {'pid':>7} {'state':<8} {'restarts':>8} {'last exit':<18} {'alive':<5} "
-          f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7}")
+          f"{'received':>8} {'published':>9} {'rejected':>8} {'dropped':>7} {'p50_ms':>7} {'p99_ms':>7} other")
 
     def shown(entry: dict) -> tuple[str, str]:
         alive = {True: "yes", False: "no", None: "?"}[entry.get("alive")] if "alive" in entry else "-"
         stats = entry.get("stats")
         figures = (f"{stats['received']:>8} {stats['published']:>9} {stats['rejected']:>8} "
-                   f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f}") if stats else ""
+                   f"{stats['dropped']:>7} {stats['p50_ms']:>7.2f} {stats['p99_ms']:>7.2f} "
+                   f"{other_figures(stats)}") if stats else ""
         return alive, figures
 
     for name, child in result["children"].items():
@@ -151,12 +152,13 @@ def command_status(args) -> int:
     alive, stats = service_status(session, args.namespace, args.timeout)
     close_or_report(args, session)
     print(f"{'service':<12} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
-          f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7}")
+          f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7} other")
     for service in key_table.SERVICES:
         row = stats.get(service)
         figures = (f"{row['received']:>9} {row['published']:>9} {row['rejected']:>8} "
-                   f"{row['dropped']:>8} {row['p50_ms']:>7.2f} {row['p99_ms']:>7.2f}") if row else ""
-        print(f"{service:<12} {'yes' if service in alive else 'no':<6} {figures}")
+                   f"{row['dropped']:>8} {row['p50_ms']:>7.2f} {row['p99_ms']:>7.2f} "
+                   f"{other_figures(row)}") if row else ""
+        print(f"{service:<12} {'yes' if service in alive else 'no':<6} {figures}".rstrip())
     return 0
 
 

@@ -3,6 +3,7 @@ file, and the ways a source ends."""
 
 import functools
 import http.server
+import re
 import threading
 
 import cv2
@@ -197,6 +198,19 @@ def test_unreadable_photos_are_skipped_and_counted(session, launch, photos):
     stats = Collector(session, "camera/stats", "Stats").wait_for(
         lambda m: m and m[-1]["rewinds"] >= 2 and m[-1], 10, "two passes")
     assert stats["unreadable_files"] == 1
+
+
+def test_status_shows_the_camera_s_own_figures(session, launch, router, photos):
+    from tests.integration.test_cli import balltrack
+
+    (photos / "frame01.png").write_bytes(b"not a png")
+    launch("camera", f"source={photos}/*.png", "rate_hz=20", "loop=true")
+    Collector(session, "camera/stats", "Stats").wait_for(lambda m: m and m[-1]["frames"] >= 1, 10, "camera stats")
+    status = balltrack("status", "--connect", router.endpoint)
+    assert status.returncode == 0, status.stderr
+    rows = {line.split()[0]: line for line in status.stdout.splitlines()[1:]}
+    assert status.stdout.splitlines()[0].split()[-1] == "other"
+    assert re.search(r" frames=[1-9]\d* .*unreadable_files=1\b", rows["camera"]), status.stdout
 
 
 def test_a_new_frame_size_is_announced_before_its_frame(session, launch, tmp_path):

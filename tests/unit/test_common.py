@@ -12,6 +12,7 @@ from balltrack.common.clock import SimClock
 from balltrack.common.config import ConfigError, load_config, parse_overrides, replace_config
 from balltrack.common.images import UnreadableImage, bgr_to_message, image_to_bgr, jpeg_size, read_image
 from balltrack.common.keys import Keys
+from balltrack.common.status import other_figures
 from balltrack.common.messages import MessageError, decode, encode, header
 
 
@@ -236,3 +237,11 @@ def test_a_handlers_time_leaves_out_the_handlers_its_puts_call(monkeypatch):
     detector.process("camera/image_raw", "Ball2D", ball, lambda _message: now.__setitem__(0, now[0] + 4.0), True)
     assert detector.stats.snapshot(0)["rejected"] == 1
     assert sorted(detector.stats._durations) == [3000.0, 4000.0]
+
+
+def test_other_figures_are_a_service_s_own_in_its_order():
+    stats = {"service": "simulator", "stamp": 1, "received": 2, "published": 3, "rejected": 0,
+             "dropped": 0, "p50_ms": 1.0, "p99_ms": 2.0, "real_time_factor": 0.998765, "frames": 40}
+    assert other_figures(stats) == "real_time_factor=0.9988 frames=40"
+    assert other_figures({**stats, "real_time_factor": 1.0, "frames": 0}) == "real_time_factor=1 frames=0"
+    assert other_figures({"service": "locator", "received": 1}) == ""
