@@ -25,6 +25,7 @@ Example::
 
 import dataclasses
 import enum
+import json
 import math
 import textwrap
 import tomllib
@@ -386,12 +387,49 @@ def read_config_file(path: str | Path, section: str | None = None) -> dict[str, 
     return settings
 
 
+def _toml_type_error(annotation: Any, value: Any) -> str | None:
+    """Why a TOML value does not suit a field of this type (None: it does). TOML values are
+    typed, unlike --set text: ``h_min = "12"`` is a string where a number belongs, and is
+    refused rather than read as one; messages spell values as TOML does (true, "12")."""
+    if typing.get_origin(annotation) is list:
+        if not isinstance(value, list):
+            return f"expected a list, got {_toml_text(value)}"
+        (item_type,) = typing.get_args(annotation) or (Any,)
+        return next(filter(None, (_toml_type_error(item_type, item) for item in value)), None)
+    if annotation is bool:
+        suits, wanted = isinstance(value, bool), "a boolean (true or false)"
+    elif annotation is int:
+        suits, wanted = isinstance(value, int) and not isinstance(value, bool), "an integer"
+    elif annotation is float:
+        suits, wanted = isinstance(value, (int, float)) and not isinstance(value, bool), "a number"
+    elif annotation is str or _is_choice(annotation):
+        suits, wanted = isinstance(value, str), "a string (in quotes)"
+    else:
+        return None
+    return None if suits else f"expected {wanted}, got {_toml_text(value)}"
+
+
+def _toml_text(value: Any) -> str:
+    """A value as TOML writes it, shortened."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return shorten(json.dumps(value), 40)
+    return shorten(value, 40)
+
+
 def load_config(cls: type[T], path: str | Path | None = None, overrides: Iterable[str] = (),
                 section: str | None = None) -> T:
     """Defaults, then the TOML file at ``path``, then ``KEY=VALUE`` overrides; validated."""
     changes: dict[str, Any] = {}
     if path:
-        changes.update(read_config_file(path, section))
+        settings = read_config_file(path, section)
+        types = _field_types(cls)
+        for key, value in settings.items():
+            reason = _toml_type_error(types[key], value) if key in types else None
+            if reason:
+                raise ConfigError(f"{path}: {key}: {reason}")
+        changes.update(settings)
     changes.update(parse_overrides(overrides))
     return _apply(cls, {}, changes)
 

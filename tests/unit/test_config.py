@@ -17,6 +17,7 @@ from balltrack.common.config import (ConfigError, check_fields, config_to_dict, 
                                      replace_config)
 from balltrack.common.messages import decode, encode
 from balltrack.common.runner import build_parser
+from balltrack.services.detector.config import DetectorConfig
 from balltrack.deploy import params
 from tests.harness import REPO, process_environment
 
@@ -215,3 +216,27 @@ def test_generic_rules_of_param():
     assert describe_config(Example)["levels"]["default"] == [0.1, 0.2]
     with pytest.raises(TypeError):
         param(1.0, "both bounds on one side", low=0, above=0)
+
+
+@pytest.mark.parametrize("line, reason", [
+    ('h_min = "12"', 'h_min: expected an integer, got "12"'),
+    ("h_min = true", "h_min: expected an integer, got true"),
+    ("h_min = 12.5", "h_min: expected an integer, got 12.5"),
+    ('min_score = "0.5"', 'min_score: expected a number, got "0.5"'),
+    ("min_score = false", "min_score: expected a number, got false"),
+])
+def test_a_toml_value_of_the_wrong_type_is_refused_as_toml_spells_it(tmp_path, line, reason):
+    # (TOML values are typed: a quoted number is a string, not read as the number it spells)
+    path = tmp_path / "detector.toml"
+    path.write_text(line + "\n")
+    with pytest.raises(ConfigError) as raised:
+        load_config(DetectorConfig, path, section="detector")
+    assert str(raised.value) == f"{path}: {reason}"
+
+
+def test_toml_values_of_their_fields_types_load_and_text_overrides_still_coerce(tmp_path):
+    path = tmp_path / "detector.toml"
+    path.write_text("h_min = 12\nmin_score = 1\n[detector]\nwork_width = 320\n")
+    config = load_config(DetectorConfig, path, ["h_max=40", "min_colourfulness=0.3"], section="detector")
+    assert (config.h_min, config.min_score, config.work_width, config.h_max, config.min_colourfulness) == \
+        (12, 1.0, 320, 40, 0.3)
