@@ -48,7 +48,8 @@ class KeySpec:
 TABLE: tuple[KeySpec, ...] = (
     KeySpec(IMAGE_RAW, "Image", "simulator, camera service, ROS 2 bridge, or any camera",
             "every frame (30 Hz default)"),
-    KeySpec(CAMERA_INFO, "CameraInfo", "simulator, camera service or ROS 2 bridge", "1 Hz, and answered as a query"),
+    KeySpec(CAMERA_INFO, "CameraInfo", "simulator, camera service or ROS 2 bridge",
+            "1 Hz, and before the first frame of each new frame size; answered as a query"),
     KeySpec(DETECTED_BALL, "Ball2D", "detector", "each frame with a ball: the largest one"),
     KeySpec(DETECTED_BALLS, "Ball2DArray", "detector", "every frame, empty list when none"),
     KeySpec(DETECTED_BALL_3D, "Ball3D", "locator", "each detected_ball"),
