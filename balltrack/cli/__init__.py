@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             # (the key a command watches or publishes, or the keys it records; play's keys are
             # the recording's, checked against it)
             if args.namespace is not None:
-                check_keys([args.key] if getattr(args, "key", None) else list(getattr(args, "keys", None) or []),
+                check_keys([args.key] if getattr(args, "key", None) is not None else list(getattr(args, "keys", None) or []),
                            args.namespace)
         except ValueError as error:
             print(f"balltrack {args.command}: {error}", file=sys.stderr)

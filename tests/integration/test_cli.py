@@ -104,6 +104,10 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["fit-colour", "--labels", "README.md"], "expected {"),
     (["status", "--namespace", "a*b"], "namespace"),
     (["hz"], "required"),
+    # (an empty key: a zenoh traceback, status 1)
+    *[([command, ""], "balltrack " + command.split()[0] + ": '': not a key expression")
+      for command in ("echo", "hz", "bw", "delay")],
+    (["topic", "info", ""], "balltrack topic: '': not a key expression"),
     (["echo", "detected_ball", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["status", "--timeout", "-1"], "--timeout: must be at least 0"),
     # (nan, 0 or a negative window: reports in a tight loop; a negative count or nan duration: never ending)
