@@ -44,7 +44,10 @@ class Graph:
                 holders = json.loads(reply.ok.payload.to_bytes())
             except ValueError:
                 continue
-            zids = {zid for group in ("routers", "peers", "clients") for zid in holders.get(group, [])}
+            # (not "routers": a router lists itself there for every declaration it routes, and
+            # its own id would then stand for every service behind it; each router of a cluster
+            # answers this query, naming its own peers and clients)
+            zids = {zid for group in ("peers", "clients") for zid in holders.get(group, [])}
             graph.declared[parts[3]]["/".join(parts[4:])] |= zids
         return graph
 

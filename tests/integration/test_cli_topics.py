@@ -175,3 +175,26 @@ def test_topic_list_from_the_root_types_and_names_other_namespaces_keys(router, 
         assert (info["type"], info["declared_publisher"], info["publishers"]) == ("Twist", "follower", ["follower"])
     finally:
         assert robot.stop() == 0, robot.output()
+
+
+def test_topic_list_and_info_name_only_the_sessions_that_declared_a_key(router, launch, log_dir):
+    # (the router lists itself beside every declaration it routes: taken for a session, it
+    # was named after every service alive, "detector+follower+locator", on every key)
+    joined = start_service("detector+follower", router.endpoint, log_dir, "--peer")
+    try:
+        launch("locator")
+
+        def subscribers():
+            listed = balltrack("topic", "list", "--connect", router.endpoint, "--window", "0.5")
+            info = balltrack("topic", "info", "camera/image_raw", "--connect", router.endpoint, "--window", "0.5")
+            assert listed.returncode == 0 and info.returncode == 0, listed.stderr + info.stderr
+            rows = {line.split()[0]: line.split() for line in listed.stdout.splitlines()[1:]}
+            found = (rows.get("detected_ball", [""] * 5)[4], json.loads(info.stdout)["subscribers"])
+            return found if "locator" in found[0] and found[1] else None
+
+        found = wait_until(subscribers, 60, "the subscribers of detected_ball and camera/image_raw", joined,
+                           every=0.1)
+        # (which of a joined process's services subscribes is not told: the process is named)
+        assert found == ("locator", ["detector+follower"])
+    finally:
+        assert joined.stop() == 0, joined.output()
