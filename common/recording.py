@@ -18,6 +18,12 @@ Layout of a balltrack recording:
   when the payload has none; sequence = the header's ``seq`` (0 when none);
 * zstd-compressed chunks, with the indexes and statistics that ``mcap info`` and readers use.
 
+A key that carries ROS 2 messages (the ROS 2 bridge's ``ros/...`` keys, zenoh-bridge-ros2dds')
+gets a channel of message encoding ``cdr`` instead, its payloads byte for byte too, with the
+``ros2msg`` schema of its type when the publisher named it (Zenoh encoding
+``application/cdr;geometry_msgs/msg/Point``) and the ``ros`` extra is installed: Foxglove and
+ROS 2 tools read those channels as they read a ROS 2 bag's.
+
 Other channels (say Foxglove's own message types, next to the msgpack ones) go through
 :meth:`Recorder.add_channel` and :meth:`Recorder.write`.
 """
@@ -32,6 +38,9 @@ from balltrack.common.messages import unpack_sharing_bins
 
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"
+# ROS 2 messages, as ROS 2 bags in MCAP store them.
+CDR_ENCODING = "cdr"
+ROS2_SCHEMA_ENCODING = "ros2msg"
 # MCAP stores the sequence number as uint32 and times as uint64.
 MAX_SEQUENCE = (1 << 32) - 1
 MAX_TIME = (1 << 64) - 1
@@ -49,6 +58,28 @@ def one_line(error: BaseException) -> str:
     text = str(error).strip().splitlines()
     reason = text[0] if text else ""
     return f"{type(error).__name__}: {reason}" if reason else type(error).__name__
+
+
+def looks_like_cdr(payload: bytes) -> bool:
+    """Whether a payload starts as a CDR-serialised ROS 2 message does: the encapsulation
+    header (00 00 or 00 01, then two option bytes of 0). No balltrack message does: a
+    msgpack map's first byte is 0x80-0x8f, 0xde or 0xdf."""
+    return len(payload) >= 4 and payload[0] == 0 and payload[1] in (0, 1) and payload[2:4] == b"\x00\x00"
+
+
+def ros2_message_definition(ros_type: str) -> bytes:
+    """The ``ros2msg`` schema data of a ROS 2 message type (its definition and those of the
+    types it holds, as ROS 2 bags store them); empty when the type is unknown or rosbags (the
+    ``ros`` extra) is not installed."""
+    try:
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        return b""
+    try:
+        text, _ = get_typestore(Stores.ROS2_HUMBLE).generate_msgdef(ros_type, ros_version=2)
+    except Exception:  # (rosbags raises its own errors for a name it does not know)
+        return b""
+    return text.encode()
 
 
 def message_schema(message_type: str) -> bytes:
@@ -91,6 +122,7 @@ class ChannelCount:
     count: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
+    has_key: bool = False  # its metadata names the Zenoh key it was recorded from (balltrack's)
 
     @property
     def rate(self) -> float:
@@ -128,6 +160,7 @@ class RecordedMessage:
     publish_time: int
     sequence: int
     message_encoding: str = MESSAGE_ENCODING
+    has_key: bool = False  # its channel's metadata names the Zenoh key (balltrack recorded it)
 
 
 class Recorder:
@@ -184,6 +217,19 @@ class Recorder:
                 return self.add_channel(topic, message_type, SCHEMA_ENCODING,
                                         message_schema(message_type), MESSAGE_ENCODING, metadata)
             return self.add_channel(topic, message_encoding=MESSAGE_ENCODING, metadata=metadata)
+
+    def cdr_channel(self, topic: str, key: str, namespace: str, ros_type: str | None) -> int:
+        """The channel of a key that carries ROS 2 messages (created on first use), with the
+        ``ros2msg`` schema of ``ros_type`` when it is known."""
+        with self._lock:
+            existing = self._channels.get(topic)
+            if existing:
+                return existing
+            metadata = {"key": key, "namespace": namespace}
+            definition = ros2_message_definition(ros_type) if ros_type else b""
+            if definition:
+                return self.add_channel(topic, ros_type, ROS2_SCHEMA_ENCODING, definition, CDR_ENCODING, metadata)
+            return self.add_channel(topic, message_encoding=CDR_ENCODING, metadata=metadata)
 
     def write(self, channel_id: int, payload: bytes, log_time: int, publish_time: int,
               sequence: int = 0) -> None:
@@ -292,7 +338,7 @@ class RecordingFile:
                     message_type=schema.name if schema is not None else "",
                     payload=bytes(message.data), log_time=message.log_time,
                     publish_time=message.publish_time, sequence=message.sequence,
-                    message_encoding=channel.message_encoding)
+                    message_encoding=channel.message_encoding, has_key="key" in channel.metadata)
         except RecordingError:
             raise
         except Exception as error:  # a corrupt chunk, a bad record: one line, never a traceback
@@ -315,7 +361,7 @@ class RecordingFile:
                     topic=channel.topic, key=channel.metadata.get("key", channel.topic),
                     message_type=schema.name if schema else "",
                     message_encoding=channel.message_encoding,
-                    count=counts.get(channel_id, 0)))
+                    count=counts.get(channel_id, 0), has_key="key" in channel.metadata))
             if statistics and statistics.message_count:
                 result.start_ns = statistics.message_start_time
                 result.end_ns = statistics.message_end_time
@@ -332,7 +378,7 @@ class RecordingFile:
             if channel is None:
                 channel = by_topic[message.topic] = ChannelCount(
                     topic=message.topic, key=message.key, message_type=message.message_type,
-                    message_encoding=message.message_encoding)
+                    message_encoding=message.message_encoding, has_key=message.has_key)
                 result.channels.append(channel)
             if count:
                 channel.count += 1

@@ -28,12 +28,16 @@ import zenoh
 
 from balltrack.common.keys import SERVICES, TABLE, Keys, stats_key
 from balltrack.common.messages import MessageError, decode
-from balltrack.common.recording import MESSAGE_ENCODING, Recorder, RecordingFile
+from balltrack.common.recording import (CDR_ENCODING, MESSAGE_ENCODING, ChannelCount, Recorder, RecordingFile,
+                                        looks_like_cdr)
 from balltrack.common.waiting import poll_until
 
 # Every key whose messages have a schema: the fixed data keys of the contract, then stats.
 DATA_KEYS = tuple(spec.key for spec in TABLE if "<" not in spec.key and "->" not in spec.message)
 DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
+# The Zenoh encoding of ROS 2 messages (the ROS 2 bridge adds ";<type>", e.g.
+# "application/cdr;geometry_msgs/msg/Point").
+CDR_KEY_ENCODING = str(zenoh.Encoding.APPLICATION_CDR)
 
 
 def foxglove_converter():
@@ -108,7 +112,7 @@ class Recording:
                 self.counts.dropped += 1
                 return
             self.counts.received += 1
-            self._pending.append((str(sample.key_expr), payload, arrival))
+            self._pending.append((str(sample.key_expr), payload, arrival, str(sample.encoding)))
             self._pending_bytes += len(payload)
             self._changed.notify_all()  # the writer, and wait_received
 
@@ -121,14 +125,20 @@ class Recording:
                 if item is None:
                     return
                 self._pending_bytes -= len(item[1])
-            topic, payload, arrival = item
+            topic, payload, arrival, encoding = item
             if self._hold > 0:
                 self._closing.wait(arrival / 1e9 + self._hold - time.time())
             key = self.keys.strip(topic)
-            channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace,
-                                                    self.keys.message_of(topic))
-            self.recorder.write_payload(channel, payload, arrival)
-            if self._foxglove is not None:
+            message_type = self.keys.message_of(topic)
+            if message_type is None and (encoding.startswith(CDR_KEY_ENCODING) or looks_like_cdr(payload)):
+                # (a ROS 2 message: the bridge names its type in the encoding, after the ";")
+                ros_type = encoding.partition(";")[2] if encoding.startswith(CDR_KEY_ENCODING) else ""
+                channel = self.recorder.cdr_channel(topic, key, self.keys.namespace, ros_type or None)
+                self.recorder.write(channel, payload, arrival, arrival)
+            else:
+                channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace, message_type)
+                self.recorder.write_payload(channel, payload, arrival)
+            if self._foxglove is not None and message_type is not None:
                 self._write_foxglove(topic, key, payload, arrival)
             with self._changed:
                 self.counts.written += 1
@@ -186,24 +196,47 @@ class PlayCounts:
 
 def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> list[str]:
     """The recorded topics to play: all, or those whose topic or key (without the recorded
-    namespace) is in ``wanted``: balltrack's msgpack channels only (the Foxglove ones are for
-    viewing). ValueError names a wanted key the recording lacks."""
+    namespace) is in ``wanted``: the channels of Zenoh keys that balltrack recorded (msgpack,
+    and CDR of ROS 2 keys), not the Foxglove ones (for viewing) nor those of other recorders (a
+    ROS 2 bag's). ValueError names a wanted key the recording lacks, and says so when it has
+    channels but none of them to play."""
     every = recording.channels()
-    channels = [channel for channel in every if channel.message_encoding == MESSAGE_ENCODING]
+    channels = [channel for channel in every if playable(channel)]
     if not wanted:
+        if every and not channels:
+            shown = "; ".join(f"{channel.topic}: {unplayable(channel)}" for channel in every[:3])
+            raise ValueError(f"no channel of the recording is one balltrack recorded from a Zenoh key "
+                             f"({shown}{'; ...' if len(every) > 3 else ''}): nothing to play")
         return [channel.topic for channel in channels]
     chosen = []
     for name in wanted:
         matches = [channel.topic for channel in channels if name in (channel.topic, channel.key)]
         if not matches:
             recorded = ", ".join(channel.topic for channel in channels) or "none"
-            if any(channel.topic == name for channel in every):
-                # (`balltrack info` lists both kinds)
-                raise ValueError(f"{name!r} is a Foxglove channel of the recording, for viewing: play "
-                                 f"publishes balltrack's keys (recorded: {recorded})")
+            other = [channel for channel in every if channel.topic == name]
+            if other:
+                # (`balltrack info` lists every kind)
+                raise ValueError(f"{name!r} is {unplayable(other[0])}: play publishes the keys balltrack "
+                                 f"recorded (recorded: {recorded})")
             raise ValueError(f"{name!r} is not in the recording (recorded: {recorded})")
         chosen.extend(match for match in matches if match not in chosen)
     return chosen
+
+
+def playable(channel: ChannelCount) -> bool:
+    """A channel balltrack recorded from a Zenoh key: msgpack, or CDR with the key in its
+    metadata (a ROS 2 bag's CDR channels have none)."""
+    return channel.message_encoding == MESSAGE_ENCODING or (
+        channel.message_encoding == CDR_ENCODING and channel.has_key)
+
+
+def unplayable(channel: ChannelCount) -> str:
+    """What a channel that play leaves out is, in a few words."""
+    if channel.message_encoding == CDR_ENCODING:
+        return "a ROS 2 (CDR) channel of another recorder"
+    if channel.message_encoding in ("protobuf", "json"):
+        return "a Foxglove channel, for viewing"
+    return f"a channel of message encoding {channel.message_encoding!r}"
 
 
 def play(session, recording: RecordingFile, stop: threading.Event, rate: float = 1.0,
@@ -242,8 +275,11 @@ def play(session, recording: RecordingFile, stop: threading.Event, rate: float =
                 key = target(message.key) if target is not None else message.topic
                 publisher = publishers.get(key)
                 if publisher is None:
+                    # (a ROS 2 key's samples as the ROS 2 bridge put them: CDR, with the type)
+                    encoding = (zenoh.Encoding.APPLICATION_CDR.with_schema(message.message_type)
+                                if message.message_encoding == CDR_ENCODING else zenoh.Encoding.ZENOH_BYTES)
                     publisher = publishers[key] = session.declare_publisher(
-                        key, congestion_control=zenoh.CongestionControl.BLOCK)
+                        key, congestion_control=zenoh.CongestionControl.BLOCK, encoding=encoding)
                 publisher.put(message.payload)
                 counts.published += 1
                 counts.per_topic[key] = counts.per_topic.get(key, 0) + 1

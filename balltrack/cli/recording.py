@@ -121,7 +121,7 @@ def command_play(args) -> int:
         return recording
     with recording:
         try:
-            topics = select_topics(recording, args.keys) if args.keys else None
+            topics = select_topics(recording, args.keys)
             duration = recording.summary(rates=False).duration
         except ValueError as error:
             return _fail(args, str(error), 2)

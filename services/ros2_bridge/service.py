@@ -19,6 +19,8 @@ import traceback
 from dataclasses import dataclass
 from typing import Callable
 
+import zenoh
+
 from balltrack.common import keys
 from balltrack.common.messages import MessageError, shorten
 from balltrack.common.context import ServiceContext, in_order
@@ -39,18 +41,22 @@ class Route:
     key: str
     message: str
     convert: str
+    ros_type: str  # the ROS side's message type (named in its samples' Zenoh encoding)
 
 
 ROUTES = (
-    Route("out_detected_ball", "to_ros", "detected_ball_topic", keys.DETECTED_BALL, "Ball2D", "ball2d_to_ros"),
+    Route("out_detected_ball", "to_ros", "detected_ball_topic", keys.DETECTED_BALL, "Ball2D", "ball2d_to_ros",
+          "geometry_msgs/msg/Point"),
     Route("out_detected_ball_3d", "to_ros", "detected_ball_3d_topic", keys.DETECTED_BALL_3D, "Ball3D",
-          "ball3d_to_ros"),
-    Route("out_cmd_vel", "to_ros", "cmd_vel_topic", keys.CMD_VEL, "Twist", "twist_to_ros"),
-    Route("in_image", "from_ros", "image_topic", keys.IMAGE_RAW, "Image", "image_from_ros"),
+          "ball3d_to_ros", "geometry_msgs/msg/PointStamped"),
+    Route("out_cmd_vel", "to_ros", "cmd_vel_topic", keys.CMD_VEL, "Twist", "twist_to_ros",
+          "geometry_msgs/msg/Twist"),
+    Route("in_image", "from_ros", "image_topic", keys.IMAGE_RAW, "Image", "image_from_ros",
+          "sensor_msgs/msg/Image"),
     Route("in_compressed_image", "from_ros", "compressed_image_topic", keys.IMAGE_RAW, "Image",
-          "compressed_image_from_ros"),
+          "compressed_image_from_ros", "sensor_msgs/msg/CompressedImage"),
     Route("in_camera_info", "from_ros", "camera_info_topic", keys.CAMERA_INFO, "CameraInfo",
-          "camera_info_from_ros"),
+          "camera_info_from_ros", "sensor_msgs/msg/CameraInfo"),
 )
 
 
@@ -108,7 +114,10 @@ class Bridge:
     def _declare_out(self, route: Route, ros_key: str) -> None:
         service = self.service
         convert: Callable[[dict], bytes] = getattr(self.convert, route.convert)
-        publisher = service.session.declare_publisher(service.keys(ros_key))
+        # (the encoding names the ROS type: `balltrack record` then stores the samples as a
+        # ROS 2 bag's channel, which Foxglove and ROS 2 tools read)
+        publisher = service.session.declare_publisher(
+            service.keys(ros_key), encoding=zenoh.Encoding.APPLICATION_CDR.with_schema(route.ros_type))
         full_key = service.keys(route.key)
 
         def handle(message: dict) -> None:

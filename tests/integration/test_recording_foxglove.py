@@ -97,7 +97,7 @@ def test_foxglove_channels_decode_independently_and_play_skips_them(router, sess
     # channel asked for by name is refused as one
     refused = balltrack("play", str(path), "--keys", "/tf", "--connect", router.endpoint)
     assert refused.returncode == 2
-    assert refused.stderr.startswith("balltrack play: '/tf' is a Foxglove channel of the recording, for viewing")
+    assert refused.stderr.startswith("balltrack play: '/tf' is a Foxglove channel, for viewing: play publishes")
     result = balltrack("play", str(path), "--rate", "0", "--connect", router.endpoint)
     assert result.returncode == 0, result.stderr
     assert f"published {len(messages) + 1} messages" in result.stdout

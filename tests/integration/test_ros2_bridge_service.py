@@ -1,13 +1,18 @@
 """The ROS 2 bridge as a real process over a real router; the ROS side read and written with
 pycdr2, a CDR implementation independent of the bridge's rosbags."""
 
+import json
+
 import cv2
 import numpy as np
 import pytest
 
 from balltrack.common.messages import encode, header
+from balltrack.common.recording import Recorder, RecordingFile
+from balltrack.services.ros2_bridge import convert
 from tests import ros2_idl as idl
-from tests.harness import Collector, query_config
+from tests.harness import Collector, Process, query_config, wait_matched, wait_until
+from tests.integration.test_recording import BALLTRACK, balltrack
 
 BALL3D = {"header": header(1_700_000_001_000_000_002, 12, "camera_optical"),
           "x": 0.25, "y": -0.5, "z": 2.0, "distance": 2.077}
@@ -97,3 +102,59 @@ def test_live_config_moves_and_switches_routes(session, bridge):
     refused = query_config(session, "ros2_bridge", {"prefix": ""})
     assert not refused["ok"] and "balltrack's own key" in refused["error"]
     assert query_config(session, "ros2_bridge")["config"]["prefix"] == "robot7/"
+
+
+def test_the_bridge_s_ros_keys_are_recorded_as_ros_2_channels_and_played_as_they_came(router, session, bridge,
+                                                                                      tmp_path):
+    # (they were written as msgpack channels without a schema: a CDR payload that no msgpack
+    # reader decodes, and that Foxglove skipped)
+    path = tmp_path / "ros.mcap"
+    recorder = Process([*BALLTRACK, "record", "-o", str(path), "ros/**", "--connect", router.endpoint,
+                        "--progress", "0.1"], tmp_path / "record.log")
+    recorder.wait_for_output("recording", 30)
+    probe = session.declare_publisher("ros/detected_ball_3d")
+    wait_matched(probe)  # (the router knows the recorder's subscription: the bridge's points reach it)
+    probe.undeclare()
+    balls = [{**BALL3D, "header": header(1_700_000_001_000_000_002 + seq, seq, "camera_optical")} for seq in range(5)]
+    for ball in balls:
+        session.put("detected_ball_3d", encode("Ball3D", ball))
+    sent = [convert.ball3d_to_ros(ball) for ball in balls]  # (what the bridge puts)
+    recorder.wait_for_output(f"{len(sent)} messages written", 30)
+    assert recorder.stop() == 0, recorder.output()
+
+    info = json.loads(balltrack("info", str(path), "--json").stdout)
+    assert [(item["key"], item["type"], item["encoding"]) for item in info["keys"]] == \
+        [("ros/detected_ball_3d", "geometry_msgs/msg/PointStamped", "cdr")]
+    with RecordingFile(path) as recording:
+        recorded = [message.payload for message in recording.messages()]
+        (channel,) = recording._summary.channels.values()
+        schema = recording._summary.schemas[channel.schema_id]
+    assert recorded == sent and schema.encoding == "ros2msg"
+    assert b"geometry_msgs/Point point" in schema.data  # (the definition, as a ROS 2 bag's)
+
+    replayed = []
+    subscriber = session.declare_subscriber("again/ros/detected_ball_3d", lambda sample: replayed.append(
+        (sample.payload.to_bytes(), str(sample.encoding))))
+    try:
+        played = balltrack("play", str(path), "--rate", "0", "--namespace", "again", "--connect", router.endpoint)
+        assert played.returncode == 0, played.stderr
+        wait_until(lambda: len(replayed) >= len(sent), 10, "the replayed points")
+    finally:
+        subscriber.undeclare()
+    assert replayed == [(payload, "application/cdr;geometry_msgs/msg/PointStamped") for payload in sent]
+
+
+def test_play_refuses_a_ros_2_bag_of_another_recorder_in_one_line(router, tmp_path):
+    path = tmp_path / "bag.mcap"
+    recorder = Recorder(path)
+    channel = recorder.add_channel("/chatter", "std_msgs/msg/String", "ros2msg", b"string data",
+                                   message_encoding="cdr")
+    recorder.write(channel, b"\x00\x01\x00\x00\x06\x00\x00\x00hello\x00", 1_000, 1_000)
+    recorder.close()
+    every = balltrack("play", str(path), "--connect", router.endpoint)
+    assert (every.returncode, every.stderr) == (2, "balltrack play: no channel of the recording is one balltrack "
+                                                   "recorded from a Zenoh key (/chatter: a ROS 2 (CDR) channel of "
+                                                   "another recorder): nothing to play\n")
+    named = balltrack("play", str(path), "--keys", "/chatter", "--connect", router.endpoint)
+    assert named.returncode == 2
+    assert named.stderr.startswith("balltrack play: '/chatter' is a ROS 2 (CDR) channel of another recorder")

@@ -15,7 +15,7 @@ from balltrack.common.keys import CORE_SERVICES, SERVICES
 from balltrack.common.messages import MessageError, header, validate
 from balltrack.services.ros2_bridge import convert
 from balltrack.services.ros2_bridge.config import Ros2BridgeConfig
-from balltrack.services.ros2_bridge.service import active_routes
+from balltrack.services.ros2_bridge.service import ROUTES, active_routes
 from tests import ros2_idl as idl
 from tests.harness import REPO
 
@@ -254,3 +254,17 @@ def test_a_joined_process_says_when_the_bridge_cannot_run_here(monkeypatch, caps
     assert status == 2 and error.splitlines() == [
         "balltrack run: ros2_bridge: needs the rosbags package for ROS 2 messages: pip install balltrack[ros]"]
     assert service.main([]) == 2 and "pip install balltrack[ros]" in capsys.readouterr().err
+
+
+def test_each_route_names_the_ros_type_its_converter_reads_or_writes():
+    # (the type goes out in the samples' Zenoh encoding, and a recording's schema is made from it)
+    messages = {"Ball2D": BALL2D, "Ball3D": BALL3D,
+                "Twist": {"header": header(6, 2), "linear": [0.2, 0.0, 0.0], "angular": [0.0, 0.0, 0.75]}}
+    for route in ROUTES:
+        if route.direction == "to_ros":
+            data = getattr(convert, route.convert)(messages[route.message])
+            assert convert.TYPESTORE.deserialize_cdr(data, route.ros_type) is not None, route
+        else:
+            reads = {"image_from_ros": convert.IMAGE, "compressed_image_from_ros": convert.COMPRESSED_IMAGE,
+                     "camera_info_from_ros": convert.CAMERA_INFO}
+            assert route.ros_type == reads[route.convert], route
