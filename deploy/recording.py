@@ -223,6 +223,21 @@ def select_topics(recording: RecordingFile, wanted: Iterable[str] | None) -> lis
     return chosen
 
 
+def check_played_keys(recording: RecordingFile, topics: list[str], namespace: str | None) -> None:
+    """ValueError naming the first of ``topics`` whose key, as ``play`` would put it (under
+    ``namespace`` when not None), Zenoh refuses: a file of another writer may name its channels
+    anyhow ("/weird topic")."""
+    target = Keys(namespace) if namespace is not None else None
+    for channel in recording.channels():
+        if channel.topic in topics:
+            key = target(channel.key) if target is not None else channel.topic
+            try:
+                zenoh.KeyExpr(key)
+            except zenoh.ZError:
+                raise ValueError(f"channel {channel.topic!r}: {key!r} is not a Zenoh key, so it cannot be "
+                                 "played") from None
+
+
 def playable(channel: ChannelCount) -> bool:
     """A channel balltrack recorded from a Zenoh key: msgpack, or CDR with the key in its
     metadata (a ROS 2 bag's CDR channels have none)."""

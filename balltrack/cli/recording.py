@@ -24,7 +24,7 @@ from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.deploy.recording import DEFAULT_KEYS, Recording, play, select_topics, wait_routed
+from balltrack.deploy.recording import DEFAULT_KEYS, Recording, check_played_keys, play, select_topics, wait_routed
 
 
 def _fail(args, reason: str, status: int) -> int:
@@ -122,6 +122,7 @@ def command_play(args) -> int:
     with recording:
         try:
             topics = select_topics(recording, args.keys)
+            check_played_keys(recording, topics, args.namespace)
             duration = recording.summary(rates=False).duration
         except ValueError as error:
             return _fail(args, str(error), 2)

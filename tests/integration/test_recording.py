@@ -241,3 +241,16 @@ def test_record_stops_after_duration_and_info_works_in_a_pipe(router, tmp_path):
                            timeout=60)
     assert piped.returncode == 0 and piped.stdout.startswith("File:")
     assert "Traceback" not in piped.stderr and "Broken pipe" not in piped.stderr, piped.stderr
+
+
+def test_play_refuses_a_channel_whose_name_is_no_zenoh_key_before_playing(router, tmp_path):
+    # (a file of another writer: zenoh's traceback when its publisher was declared, status 1)
+    path = tmp_path / "odd.mcap"
+    recorder = Recorder(path)
+    channel = recorder.msgpack_channel("/weird topic", "/weird topic", "", None)
+    recorder.write_payload(channel, ball3d(1), 1_000)
+    recorder.close()
+    result = balltrack("play", str(path), "--connect", router.endpoint)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == ("balltrack play: channel '/weird topic': '/weird topic' is not a Zenoh key, "
+                             "so it cannot be played\n")
