@@ -10,10 +10,12 @@ detector's annotated frame), /scene (located and true balls), /tf (world -> base
 /cmd_vel. Stops within a fraction of a second on SIGINT or SIGTERM.
 """
 
+import re
 import sys
 import urllib.parse
 
 from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.common.network import port_taken
 from balltrack.common.shutdown import stop_on_signals
 
 
@@ -22,12 +24,21 @@ def _fail(args, reason: str, status: int) -> int:
     return status
 
 
+# The amounts Rerun's server_memory_limit takes (it refuses "100", "1gb", "1KB").
+MEMORY_LIMIT = re.compile(r"0|\d+(\.\d+)? ?(%|B|kB|MB|GB|TB|KiB|MiB|GiB|TiB)")
+
+
 def _serve_rerun(args, session, stop) -> int:
     import rerun as rr
 
     from balltrack.deploy.view import RerunBridge, rerun_blueprint
 
     recording = rr.RecordingStream("balltrack")
+    # (Rerun only logs that its data port is taken, and goes on: the page it serves would then
+    # show whatever holds that port)
+    for port in (args.grpc_port, args.port):
+        if port_taken(port):
+            return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: port {port} is in use", 1)
     try:
         server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit,
                                       default_blueprint=rerun_blueprint())
@@ -91,6 +102,9 @@ def command_view(args) -> int:
         return _fail(args, "--host: Rerun's viewer serves on every interface (its Python API takes "
                            "no address); --foxglove serves on one", 2)
     args.host = args.host or "127.0.0.1"
+    if not args.foxglove and not MEMORY_LIMIT.fullmatch(args.memory_limit):
+        return _fail(args, f"--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), "
+                           f"got {args.memory_limit!r}", 2)
     for option, port in (("--port", args.port), ("--grpc-port", args.grpc_port)):
         if not 0 <= port <= 65535 or (port == 0 and not args.foxglove):
             return _fail(args, f"{option}: {port} is not a TCP port (1-65535; 0, any free one, "
@@ -122,4 +136,4 @@ def register(commands) -> None:
     sub.add_argument("--grpc-port", type=int, default=9876,
                      help="Rerun: the port its viewer reads the data from (default 9876)")
     sub.add_argument("--memory-limit", default="256MiB",
-                     help="Rerun: data kept for viewers that connect later (default 256MiB)")
+                     help="Rerun: data kept for viewers that connect later (default 256MiB; e.g. 2GB, 25%% of the RAM)")

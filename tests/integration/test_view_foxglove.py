@@ -5,6 +5,7 @@ advertised, and the annotated frame arrives as a CompressedImage whose JPEG show
 import asyncio
 import json
 import re
+import socket
 import struct
 import sys
 import threading
@@ -18,7 +19,7 @@ websockets = pytest.importorskip("websockets")
 
 from balltrack.common.images import bgr_to_message  # noqa: E402
 from balltrack.common.messages import encode  # noqa: E402
-from tests.harness import Process, draw_ball, floor_image  # noqa: E402
+from tests.harness import Process, draw_ball, floor_image, free_port  # noqa: E402
 
 WIDTH, HEIGHT = 320, 240
 BALL_U, BALL_V, BALL_RADIUS = 200.0, 140.0, 30.0
@@ -152,6 +153,9 @@ def test_annotated_frame_reaches_a_foxglove_client(session, launch, viewer):
     (["--port", "70000"], "--port: 70000 is not a TCP port"),
     (["--port", "0"], "--port: 0 is not a TCP port"),
     (["--host", "127.0.0.1"], "--host: Rerun's viewer serves on every interface"),
+    # (Rerun's own refusal came once its session had opened: "cannot serve on ports", status 1)
+    (["--memory-limit", "abc"], "--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), got 'abc'"),
+    (["--memory-limit", "100"], "--memory-limit: expected an amount"),
 ])
 def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
     process = Process([sys.executable, "-m", "balltrack", "view", *arguments, "--connect", router.endpoint],
@@ -160,3 +164,16 @@ def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
     output = process.output()
     process.stop()
     assert reason in output and "Traceback" not in output, output
+
+
+def test_rerun_s_data_port_in_use_is_refused_not_served_beside(router, log_dir):
+    # (Rerun logged that it could not listen, and the viewer's link led to the other process)
+    with socket.socket() as holder:
+        holder.bind(("0.0.0.0", 0))
+        holder.listen()
+        taken, web = holder.getsockname()[1], free_port()
+        process = Process([sys.executable, "-m", "balltrack", "view", "--port", str(web), "--grpc-port", str(taken),
+                           "--connect", router.endpoint], log_dir / "viewer-taken.log")
+        assert process.popen.wait(30) == 1, process.output()
+    errors = [line for line in process.output().splitlines() if line.startswith("balltrack view:")]
+    assert errors == [f"balltrack view: cannot serve on ports {web}/{taken}: port {taken} is in use"], process.output()
