@@ -62,6 +62,16 @@ class Ros2BridgeConfig:
             if key in BALLTRACK_KEYS:
                 raise ConfigError(f"{name}: {topic!r} with prefix {self.prefix!r} is balltrack's own "
                                   f"key {key!r}; set a prefix")
+        # Two routes on one key: the bridge would read back what it writes there, or take one
+        # ROS type for another (a CompressedImage where an Image belongs), and reject half.
+        routed: dict[str, str] = {}
+        for name, switches in ROUTE_SWITCHES.items():
+            if all(getattr(self, switch) for switch in switches):
+                key = self.ros_key(name)
+                if key in routed:
+                    raise ConfigError(f"{name}: {getattr(self, name)!r} is also {routed[key]} (key {key!r}); "
+                                      "two routes cannot share a topic")
+                routed[key] = name
 
     def ros_key(self, topic_field: str) -> str:
         """The Zenoh key (without the service's namespace) of one ROS topic field."""
@@ -72,4 +82,11 @@ class Ros2BridgeConfig:
 MAX_NAME = 256
 TOPIC_FIELDS = ("detected_ball_topic", "detected_ball_3d_topic", "cmd_vel_topic", "image_topic",
                 "compressed_image_topic", "camera_info_topic")
+# Each topic field with the switches that turn its route on (the routes: ``service.ROUTES``).
+ROUTE_SWITCHES = {"detected_ball_topic": ("to_ros", "out_detected_ball"),
+                  "detected_ball_3d_topic": ("to_ros", "out_detected_ball_3d"),
+                  "cmd_vel_topic": ("to_ros", "out_cmd_vel"),
+                  "image_topic": ("from_ros", "in_image"),
+                  "compressed_image_topic": ("from_ros", "in_compressed_image"),
+                  "camera_info_topic": ("from_ros", "in_camera_info")}
 BALLTRACK_KEYS = frozenset(spec.key for spec in key_table.TABLE if "<" not in spec.key)

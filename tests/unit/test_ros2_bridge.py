@@ -14,7 +14,7 @@ from balltrack.common.config import ConfigError
 from balltrack.common.keys import CORE_SERVICES, SERVICES
 from balltrack.common.messages import MessageError, header, validate
 from balltrack.services.ros2_bridge import convert
-from balltrack.services.ros2_bridge.config import Ros2BridgeConfig
+from balltrack.services.ros2_bridge.config import ROUTE_SWITCHES, Ros2BridgeConfig
 from balltrack.services.ros2_bridge.service import ROUTES, active_routes
 from tests import ros2_idl as idl
 from tests.harness import REPO
@@ -268,3 +268,27 @@ def test_each_route_names_the_ros_type_its_converter_reads_or_writes():
             reads = {"image_from_ros": convert.IMAGE, "compressed_image_from_ros": convert.COMPRESSED_IMAGE,
                      "camera_info_from_ros": convert.CAMERA_INFO}
             assert route.ros_type == reads[route.convert], route
+
+
+def test_the_config_knows_each_route_s_switches():
+    assert ROUTE_SWITCHES == {route.topic: (route.direction, route.switch) for route in ROUTES}
+
+
+@pytest.mark.parametrize("settings, reason", [
+    ({"image_topic": "/detected_ball"}, "image_topic: '/detected_ball' is also detected_ball_topic "
+                                        "(key 'ros/detected_ball'); two routes cannot share a topic"),
+    ({"in_compressed_image": True, "compressed_image_topic": "/camera/image_raw"},
+     "compressed_image_topic: '/camera/image_raw' is also image_topic"),
+    ({"cmd_vel_topic": "detected_ball_3d"}, "cmd_vel_topic: 'detected_ball_3d' is also detected_ball_3d_topic"),
+])
+def test_two_routes_on_one_topic_are_refused(settings, reason):
+    # (the bridge read its own Points back as Images, and rejected every second message)
+    with pytest.raises(ConfigError) as raised:
+        Ros2BridgeConfig(**settings)
+    assert str(raised.value).startswith(reason)
+
+
+def test_a_topic_shared_with_a_route_that_is_off_is_allowed():
+    config = Ros2BridgeConfig(compressed_image_topic="/camera/image_raw")  # (in_compressed_image is off)
+    assert config.ros_key("compressed_image_topic") == config.ros_key("image_topic")
+    assert Ros2BridgeConfig(image_topic="/detected_ball", from_ros=False).to_ros
