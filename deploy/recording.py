@@ -38,6 +38,9 @@ DEFAULT_KEYS = DATA_KEYS + tuple(stats_key(service) for service in SERVICES)
 # The Zenoh encoding of ROS 2 messages (the ROS 2 bridge adds ";<type>", e.g.
 # "application/cdr;geometry_msgs/msg/Point").
 CDR_KEY_ENCODING = str(zenoh.Encoding.APPLICATION_CDR)
+# Payloads a recording holds while its writer catches up (a few hundred camera frames); what
+# arrives past them is dropped and counted.
+MAX_QUEUED_BYTES = 256 << 20
 
 
 def foxglove_converter():
@@ -73,7 +76,7 @@ class Recording:
     ``namespace`` from ``session`` into ``path`` until :meth:`close`."""
 
     def __init__(self, session, path, keys: Iterable[str] = DEFAULT_KEYS, namespace: str = "",
-                 max_queued_bytes: int = 256 << 20, metadata: dict[str, str] | None = None,
+                 max_queued_bytes: int = MAX_QUEUED_BYTES, metadata: dict[str, str] | None = None,
                  foxglove: bool | None = None, hold: float = 0.0):
         self.keys = Keys(namespace)
         self._foxglove = foxglove_converter() if foxglove is not False else None

@@ -24,7 +24,7 @@ from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.deploy.recording import DEFAULT_KEYS, Recording, check_played_keys, play, select_topics, wait_routed
+from balltrack.deploy.recording import DEFAULT_KEYS, MAX_QUEUED_BYTES, Recording, check_played_keys, play, select_topics, wait_routed
 
 
 def _fail(args, reason: str, status: int) -> int:
@@ -107,7 +107,9 @@ def command_record(args) -> int:
     finally:
         close_or_report(args, session)
     out.line(f"recorded {counts.written} messages in {elapsed:.1f} s into {args.output}"
-             + (f" ({counts.dropped} dropped: the disk was too slow)" if counts.dropped else ""))
+             + (f" ({counts.dropped} dropped: compressing and writing fell {MAX_QUEUED_BYTES >> 20} MB "
+                  "behind what arrived)"
+                if counts.dropped else ""))
     for topic, count in sorted(counts.per_topic.items()):
         out.line(f"  {topic:<28} {count:>8}")
     if out.closed:
