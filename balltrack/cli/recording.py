@@ -24,7 +24,8 @@ from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.deploy.recording import DEFAULT_KEYS, MAX_QUEUED_BYTES, Recording, check_played_keys, play, select_topics, wait_routed
+from balltrack.deploy.recording import (DEFAULT_KEYS, MAX_QUEUED_BYTES, Recording, check_played_keys, play,
+                                        select_topics, wait_routed)
 
 
 def _fail(args, reason: str, status: int) -> int:

@@ -154,7 +154,8 @@ def test_annotated_frame_reaches_a_foxglove_client(session, launch, viewer):
     (["--port", "0"], "--port: 0 is not a TCP port"),
     (["--host", "127.0.0.1"], "--host: Rerun's viewer serves on every interface"),
     # (Rerun's own refusal came once its session had opened: "cannot serve on ports", status 1)
-    (["--memory-limit", "abc"], "--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), got 'abc'"),
+    (["--memory-limit", "abc"],
+     "--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), got 'abc'"),
     (["--memory-limit", "100"], "--memory-limit: expected an amount"),
 ])
 def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
