@@ -26,6 +26,9 @@ from balltrack.common.messages import MessageError, decode, encode, shorten
 # frames ~0.2 ms sooner than a hand-over from a callback (demo, frame -> detected_ball p50 3.7
 # and 3.7 ms against 3.9 and 3.9, two runs each).
 LATEST_RING = 8
+# A wall-clock timer (ServiceContext.every) waits at most this long before it reads its period
+# again, so that a rate changed live applies within it.
+TIMER_SLICE_S = 0.5
 # Seconds spent, on this thread, in handlers that the current handler's puts called: with
 # several services in one process a put runs a subscriber of the same session at once, and
 # each service's processing time is its own (ServiceContext.process).
@@ -317,11 +320,19 @@ class ServiceContext:
                         run(callback)
 
         def wall_loop():
-            next_tick = time.monotonic()
+            last_tick = time.monotonic()
+            run(callback)
             while not self.stop.is_set():
+                # (the period is read again at least every TIMER_SLICE_S: a rate changed live
+                # takes effect then, not after the old period has run out)
+                current = period()
+                now = time.monotonic()
+                if now < last_tick + current:
+                    self.stop.wait(min(last_tick + current - now, TIMER_SLICE_S))
+                    continue
+                # (on schedule; more than a period behind, the schedule starts again from now)
+                last_tick = last_tick + current if now - last_tick < 2 * current else now
                 run(callback)
-                next_tick = max(next_tick + period(), time.monotonic() - period())
-                self.stop.wait(max(0.0, next_tick - time.monotonic()))
 
         loop = sim_loop if isinstance(self.clock, SimClock) else wall_loop
         self.start_thread(loop, f"{self.name}-timer")

@@ -34,7 +34,7 @@ class CameraConfig:
                              "a live stream URL (`rtsp://...`, `http://host/video.mjpg`)")
     rate_hz: float = param(0.0, "frames per second published; 0 = the source's own: a video's frame rate, "
                                 "a device's native rate, photos as fast as they load; can be changed live",
-                           low=0, high=1000)
+                           low=0.01, off=0, high=1000)
     loop: bool = param(False, "start a video or the photos again at the end (else the service exits 0 "
                               "there); can be changed live")
     # Devices choose the nearest size they have; files are never resized.

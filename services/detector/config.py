@@ -109,7 +109,7 @@ class DetectorConfig:
     # core to the camera and Zenoh. In whole demos the difference was within their run-to-run
     # noise (frame -> 3D p50 5.3-5.5 against 5.3-5.6 ms, four runs in a slow hour).
     threads: int = param(1, "OpenCV threads of the detector service's process (cv2.setNumThreads); "
-                            "0 = OpenCV's default, one per core", low=0)
+                            "0 = OpenCV's default, one per core", low=0, high=64)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -29,7 +29,8 @@ class FollowerConfig:
     # 1 would never let a detection in.
     filter_value: float = param(0.9, "exponential filter memory in [0, 1) (0.9 = 90 % old value)",
                                 low=0, below=1)
-    rate_hz: float = param(10.0, "cmd_vel timer rate (Hz)", above=0, high=1000)
+    # (at least a command every 10 s: the timer is also the watchdog that starts the search)
+    rate_hz: float = param(10.0, "cmd_vel timer rate (Hz)", low=0.1, high=1000)
     use_sim_time: bool = param(False, "read time from the `clock` key (simulated time) instead of the "
                                       "wall clock")
     # The original always spins at +search_angular_speed.

@@ -40,19 +40,20 @@ class SimulatorConfig:
     # Gazebo's default.
     hfov: float = param(1.089, "camera horizontal field of view (rad)", low=0.05, high=3.0)
     # One step_frame() advances 1 / rate_hz seconds.
-    rate_hz: float = param(30.0, "camera frames per simulated second", above=0, high=1000)
+    rate_hz: float = param(30.0, "camera frames per simulated second", low=1, high=1000)
     # Lockstep waits for the detector's answer and, on command ticks, the follower's cmd_vel,
     # so runs are reproducible whatever the machine's load.
     pacing: Pacing = param(Pacing.realtime, "`realtime` (follows the wall clock), `fast` (as fast as it "
                                             "can) or `lockstep` (waits for the pipeline's answers: "
                                             "reproducible)")
-    real_time_factor: float = param(1.0, "simulated seconds per wall second in `realtime` pacing", above=0)
+    # (a frame waits for its time at the factor it was made with: at the slowest, 100 s)
+    real_time_factor: float = param(1.0, "simulated seconds per wall second in `realtime` pacing", low=0.01)
     lockstep_timeout: float = param(0.5, "longest wait for the pipeline per frame in `lockstep` (wall s)",
-                                    above=0)
+                                    above=0, high=60)
     # Frames whose clock crosses a multiple of 1 / lockstep_command_rate_hz simulated seconds
     # wait for the follower's cmd_vel of that tick (its timer rate, 10 Hz).
     lockstep_command_rate_hz: float = param(10.0, "in `lockstep`, the follower's timer rate whose commands "
-                                                  "are waited for", above=0, high=1000)
+                                                  "are waited for", low=0.1, high=1000)
     cmd_timeout: float = param(0.5, "safety stop: no cmd_vel for this long (simulated s) -> velocity 0",
                                above=0)
     max_linear: float = param(0.5, "commands are clamped to this forward speed (m/s)", above=0, high=10)

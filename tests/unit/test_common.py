@@ -2,6 +2,8 @@
 
 import dataclasses
 import math
+import time
+import types
 
 import cv2
 import msgpack
@@ -10,10 +12,12 @@ import pytest
 
 from balltrack.common.clock import SimClock
 from balltrack.common.config import ConfigError, load_config, parse_overrides, replace_config
+from balltrack.common.context import ServiceContext
 from balltrack.common.images import UnreadableImage, bgr_to_message, image_to_bgr, jpeg_size, read_image
 from balltrack.common.keys import Keys
-from balltrack.common.status import other_figures
 from balltrack.common.messages import MessageError, decode, encode, header
+from balltrack.common.status import other_figures
+from tests.harness import wait_until
 
 
 def ball2d(**changes):
@@ -245,3 +249,19 @@ def test_other_figures_are_a_service_s_own_in_its_order():
     assert other_figures(stats) == "real_time_factor=0.9988 frames=40"
     assert other_figures({**stats, "real_time_factor": 1.0, "frames": 0}) == "real_time_factor=1 frames=0"
     assert other_figures({"service": "locator", "received": 1}) == ""
+
+
+def test_a_wall_timer_takes_a_rate_changed_live_without_waiting_out_the_old_period():
+    # (it waited the old period out: a follower set to rate_hz=0.001 and back to 10 stayed
+    # silent for 1000 s)
+    context = ServiceContext("timer", None, "", types.SimpleNamespace())
+    period, ticks = [1000.0], []
+    context.every(lambda: period[0], lambda: ticks.append(time.monotonic()))
+    try:
+        wait_until(lambda: ticks, 5, "the first tick")
+        period[0] = 0.01
+        wait_until(lambda: len(ticks) >= 5, 5, "ticks at the new rate")
+    finally:
+        context.stop.set()
+        context.close()
+    assert all(later > earlier for earlier, later in zip(ticks, ticks[1:]))

@@ -240,3 +240,19 @@ def test_toml_values_of_their_fields_types_load_and_text_overrides_still_coerce(
     config = load_config(DetectorConfig, path, ["h_max=40", "min_colourfulness=0.3"], section="detector")
     assert (config.h_min, config.min_score, config.work_width, config.h_max, config.min_colourfulness) == \
         (12, 1.0, 320, 40, 0.3)
+
+
+@pytest.mark.parametrize("service, setting", [
+    # (each was taken: 1e6 threads exhausted the host's processes; the others made a wait of
+    # 1e300 s, an OverflowError that killed the follower's timer, the camera or the simulator)
+    ("detector", "threads=1000000"),
+    ("follower", "rate_hz=1e-300"),
+    ("camera", "rate_hz=1e-300"),
+    ("simulator", "real_time_factor=1e-300"),
+    ("simulator", "lockstep_timeout=1e300"),
+    ("simulator", "lockstep_command_rate_hz=1e-300"),
+])
+def test_a_setting_that_would_stall_or_exhaust_a_service_is_refused(service, setting):
+    name = setting.partition("=")[0]
+    with pytest.raises(ConfigError, match=f"^{name}: must be"):
+        load_config(CONFIGS[service], overrides=[setting])
