@@ -24,6 +24,7 @@ def command_detect(args) -> int:
     from balltrack.services.detector.config import DetectorConfig
     from balltrack.services.detector.detector import BallDetector
     from balltrack.services.detector.explain import explain_place, summary
+    from balltrack.services.detector.mask import check_image
 
     try:
         config = load_config(DetectorConfig, args.config, args.overrides, section="detector")
@@ -39,8 +40,13 @@ def command_detect(args) -> int:
             break
         try:
             image = read_image(path)
+            check_image(image)
         except UnreadableImage as error:
             print(json.dumps({"file": path, "error": f"cannot read image ({error})"}), flush=True)
+            status = 1
+            continue
+        except ValueError as error:  # (smaller than the detector takes: 8 px a side)
+            print(json.dumps({"file": path, "error": f"cannot detect in it ({error})"}), flush=True)
             status = 1
             continue
         result, judged = detector.detect_judged(image) if places else (detector.detect(image), [])

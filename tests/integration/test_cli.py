@@ -223,13 +223,16 @@ def test_unreadable_image_is_reported_not_fatal(tmp_path):
     good = tmp_path / "good.png"
     cv2.imwrite(str(good), floor_image(64, 48))
     (tmp_path / "text.png").write_text("not an image\n")
-    result = balltrack("detect", str(tmp_path / "missing.png"), str(tmp_path / "text.png"), str(tmp_path), str(good))
+    tiny = tmp_path / "tiny.png"  # (a traceback, and the files after it left undone)
+    cv2.imwrite(str(tiny), floor_image(7, 7))
+    result = balltrack("detect", str(tmp_path / "missing.png"), str(tmp_path / "text.png"), str(tmp_path),
+                       str(tiny), str(good))
     assert result.returncode == 1
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     assert [line.get("error") for line in lines] == [
         "cannot read image (No such file or directory)", "cannot read image (not an image OpenCV decodes)",
-        "cannot read image (Is a directory)", None]
-    assert lines[3]["balls"] == []
+        "cannot read image (Is a directory)", "cannot detect in it (image too small: 7x7)", None]
+    assert lines[4]["balls"] == []
     # (the reason is in the line: no warning of OpenCV's own beside it)
     assert result.stderr == ""
 
