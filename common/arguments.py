@@ -51,8 +51,10 @@ class ArgumentParser(argparse.ArgumentParser):
         return extras
 
 
-def number(minimum: float | None = None, above: float | None = None) -> Callable[[str], float]:
-    """A finite float, at least ``minimum`` or greater than ``above`` (when given)."""
+def number(minimum: float | None = None, above: float | None = None,
+           maximum: float | None = None) -> Callable[[str], float]:
+    """A finite float, at least ``minimum`` or greater than ``above``, and at most ``maximum``
+    (when given)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
@@ -61,11 +63,41 @@ def number(minimum: float | None = None, above: float | None = None) -> Callable
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
         if minimum is not None and value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum:g}, got {text}")
+            raise argparse.ArgumentTypeError(f"must be at least {_shown(minimum)}, got {text}")
         if above is not None and value <= above:
-            raise argparse.ArgumentTypeError(f"must be greater than {above:g}, got {text}")
+            raise argparse.ArgumentTypeError(f"must be greater than {_shown(above)}, got {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {_shown(maximum)}, got {text}")
         return value
     return parse
+
+
+def _shown(bound: float) -> str:
+    """A bound as a person writes it: 10000000, 0.01."""
+    return str(int(bound)) if float(bound).is_integer() and abs(bound) < 1e15 else f"{bound:g}"
+
+
+# The longest time (s) a command's option may ask it to wait or run: 116 days. Python's waits
+# refuse more than ~9.2e9 s (OverflowError), Zenoh's timeouts are in ms.
+LONGEST_SECONDS = 1e7
+
+
+def zero_or(minimum: float, maximum: float, zero: str) -> Callable[[str], float]:
+    """0 (meaning ``zero``: "once", "as fast as possible") or a number from ``minimum`` to
+    ``maximum``: a rate, whose period must stay a time a command can wait."""
+    within = number(minimum=0, maximum=maximum)
+
+    def parse(text: str) -> float:
+        value = within(text)
+        if 0 < value < minimum:
+            raise argparse.ArgumentTypeError(f"must be 0 ({zero}) or at least {_shown(minimum)}, got {text}")
+        return value
+    return parse
+
+
+def seconds(minimum: float | None = None, above: float | None = None) -> Callable[[str], float]:
+    """``number`` for a time in seconds: at most LONGEST_SECONDS."""
+    return number(minimum, above, LONGEST_SECONDS)
 
 
 def integer(minimum: int | None = None, maximum: int | None = None) -> Callable[[str], int]:

@@ -24,7 +24,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from balltrack.common.arguments import ArgumentParser, number
+from balltrack.common.arguments import ArgumentParser, seconds
 from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
 from balltrack.common.network import port_taken
@@ -457,14 +457,14 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     start.add_argument("--set", action="append", default=[], dest="overrides",
                        metavar="SERVICE.KEY=VALUE", help="a service parameter, repeatable")
     start.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
-    start.add_argument("--wait", type=number(minimum=0), default=60.0, metavar="SECONDS",
+    start.add_argument("--wait", type=seconds(minimum=0), default=60.0, metavar="SECONDS",
                        help="wait this long for the services' liveliness (0: do not wait)")
     start.add_argument("--foreground", action="store_true",
                        help="run the supervisor in this process (Ctrl-C stops everything)")
     start.set_defaults(handler=command_start)
 
     stop = with_run_dir(commands.add_parser("stop", help="stop the supervisor and its children"))
-    stop.add_argument("--timeout", type=number(minimum=0), default=40.0)
+    stop.add_argument("--timeout", type=seconds(minimum=0), default=40.0)
     stop.set_defaults(handler=command_stop)
 
     supervise_command = with_run_dir(commands.add_parser(

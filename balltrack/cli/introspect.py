@@ -15,7 +15,7 @@ from collections import defaultdict
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
-from balltrack.common.arguments import number
+from balltrack.common.arguments import seconds
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.shutdown import stop_on_signals
@@ -207,7 +207,7 @@ def register(commands) -> None:
     actions = topic.add_subparsers(dest="action", required=True, parser_class=type(topic))
 
     def window(sub):
-        sub.add_argument("--window", type=number(above=0), default=1.0,
+        sub.add_argument("--window", type=seconds(minimum=0.01), default=1.0,
                          help="seconds to listen for rates (default 1)")
         return sub
 

@@ -13,7 +13,7 @@ import time
 import yaml
 
 from balltrack.cli.session import close_or_report, networked, open_or_report
-from balltrack.common.arguments import integer, number
+from balltrack.common.arguments import integer, zero_or
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, encode, header, shorten
 from balltrack.common.shutdown import stop_on_signals
@@ -85,6 +85,6 @@ def register(commands) -> None:
     pub.add_argument("key")
     pub.add_argument("message", metavar="MESSAGE", help="the message as YAML or JSON")
     pub.add_argument("--type", choices=sorted(SCHEMAS), help="message type (default: from the key table)")
-    pub.add_argument("--rate", type=number(minimum=0), default=0.0, metavar="HZ",
+    pub.add_argument("--rate", type=zero_or(0.001, 10_000, "once"), default=0.0, metavar="HZ",
                      help="publish repeatedly at this rate until stopped (default: once)")
     pub.add_argument("--count", type=integer(minimum=0), default=0, help="with --rate: stop after N messages")

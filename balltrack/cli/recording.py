@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
-from balltrack.common.arguments import number, unwritable_reason
+from balltrack.common.arguments import seconds, unwritable_reason, zero_or
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
 from balltrack.common.session import peer_conflict
@@ -219,12 +219,12 @@ def register(commands) -> None:
                         help="the file to write (replaced if it exists)")
     record.add_argument("keys", nargs="*", metavar="KEY",
                         help="keys or key expressions (default: every data and stats key)")
-    record.add_argument("--duration", type=number(above=0), default=None, metavar="S",
+    record.add_argument("--duration", type=seconds(above=0), default=None, metavar="S",
                         help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
     record.add_argument("--no-foxglove", action="store_true",
                         help="only the msgpack channels (default: also Foxglove-typed channels "
                              "for viewing, when foxglove-sdk is installed)")
-    record.add_argument("--progress", type=number(minimum=0), default=0.0, metavar="S",
+    record.add_argument("--progress", type=seconds(minimum=0), default=0.0, metavar="S",
                         help="print the messages written so far every S seconds on stderr")
     record.add_argument("--hold", type=float, default=0.0, metavar="S",
                         help="leave each message S seconds after it arrives before compressing "
@@ -238,12 +238,12 @@ def register(commands) -> None:
     # No namespace given: the recorded keys as they were; --namespace NS moves them under NS.
     replay.set_defaults(namespace=None)
     replay.add_argument("file", metavar="FILE.mcap")
-    replay.add_argument("--rate", type=number(minimum=0), default=1.0,
+    replay.add_argument("--rate", type=zero_or(0.001, 1e6, "as fast as possible"), default=1.0,
                         help="speed factor of the recorded timing; 0 = as fast as possible")
     replay.add_argument("--loop", action="store_true", help="start again at the end, until stopped")
     replay.add_argument("--keys", nargs="+", metavar="K", default=None,
                         help="play only these keys (as recorded, with or without namespace)")
-    replay.add_argument("--start", type=number(minimum=0), default=0.0, metavar="S",
+    replay.add_argument("--start", type=seconds(minimum=0), default=0.0, metavar="S",
                         help="skip the first S seconds of the recording")
     info = commands.add_parser("info", help="what a recording holds (keys, types, counts, rates)",
                                description="what a recording holds, as `ros2 bag info`")

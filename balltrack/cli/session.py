@@ -3,7 +3,7 @@
 import os
 import sys
 
-from balltrack.common.arguments import number
+from balltrack.common.arguments import seconds
 from balltrack.common.keys import Keys
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
                                       open_from_args, open_until_stopped, zenoh_reason)
@@ -13,7 +13,7 @@ def networked(commands, name: str, help_text: str, handler, timeout: float = 3.0
     """A subcommand with the session options (``peer``: and --peer) and ``--timeout``."""
     sub = commands.add_parser(name, help=help_text, description=help_text)
     add_session_arguments(sub, config_file=False, peer=peer)
-    sub.add_argument("--timeout", type=number(minimum=0), default=timeout,
+    sub.add_argument("--timeout", type=seconds(minimum=0), default=timeout,
                      help=f"seconds to wait for a router and for answers (default {timeout:g})")
     sub.set_defaults(handler=handler)
     return sub

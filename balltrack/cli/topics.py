@@ -14,7 +14,7 @@ import msgpack
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
 from balltrack.cli.session import close_or_report, networked, open_or_report
-from balltrack.common.arguments import integer, number
+from balltrack.common.arguments import integer, seconds
 from balltrack.common import keys as key_table
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, decode
@@ -208,14 +208,14 @@ def register(commands) -> None:
                       help="message type (default: from the key table)")
     hz = networked(commands, "hz", "measure the rate of a key", command_hz)
     hz.add_argument("key")
-    hz.add_argument("--window", type=number(above=0), default=2.0, help="seconds per report")
+    hz.add_argument("--window", type=seconds(minimum=0.01), default=2.0, help="seconds per report")
     hz.add_argument("--count", type=integer(minimum=0), default=0, help="stop after N reports")
     for name, help_text, handler in (("bw", "measure a key's bandwidth, as ros2 topic bw", command_bw),
                                      ("delay", "age of a key's header stamps, as ros2 topic delay",
                                       command_delay)):
         sub = networked(commands, name, help_text, handler)
         sub.add_argument("key")
-        sub.add_argument("--window", type=number(above=0), default=2.0, help="seconds per report")
+        sub.add_argument("--window", type=seconds(minimum=0.01), default=2.0, help="seconds per report")
         sub.add_argument("--count", type=integer(minimum=0), default=0, help="stop after N reports")
         if name == "delay":
             sub.add_argument("--use-sim-time", action="store_true",

@@ -111,11 +111,17 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["echo", "detected_ball", "--timeout", "nan"], "--timeout: must be a finite number"),
     (["status", "--timeout", "-1"], "--timeout: must be at least 0"),
     # (nan, 0 or a negative window: reports in a tight loop; a negative count or nan duration: never ending)
-    (["hz", "detected_ball", "--window", "0"], "--window: must be greater than 0"),
+    (["hz", "detected_ball", "--window", "0"], "--window: must be at least 0.01"),
+    # (a wait past Python's ~9.2e9 s is an OverflowError, traceback, and then a hang; a rate
+    # whose period is as long, the same)
+    (["status", "--timeout", "1e10"], "--timeout: must be at most 10000000, got 1e10"),
+    (["record", "-o", "x.mcap", "--duration", "1e300"], "--duration: must be at most 10000000"),
+    (["pub", "cmd_vel", "{}", "--rate", "1e-300"], "--rate: must be 0 (once) or at least 0.001, got 1e-300"),
+    (["play", "x.mcap", "--rate", "1e-300"], "--rate: must be 0 (as fast as possible) or at least 0.001"),
     (["bw", "detected_ball", "--window", "nan"], "--window: must be a finite number"),
     (["delay", "detected_ball", "--count", "-1"], "--count: must be at least 0"),
     (["echo", "detected_ball", "--count", "-2"], "--count: must be at least 0"),
-    (["topic", "list", "--window", "-1"], "--window: must be greater than 0"),
+    (["topic", "list", "--window", "-1"], "--window: must be at least 0.01"),
     (["record", "-o", "x.mcap", "--duration", "nan"], "--duration: must be a finite number"),
     (["record", "-o", "x.mcap", "--progress", "-1"], "--progress: must be at least 0"),
     # (an output that cannot be written: said before any router is sought, not after)
