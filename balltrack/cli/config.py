@@ -18,13 +18,16 @@ from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
+from balltrack.common.shutdown import stop_on_signals
 
 ACTIONS = ("dump", "load")
 
 
 def ask(args, service: str, request: dict, field: str = "config") -> tuple[int, dict | None]:
     """(exit status, the ConfigReply's ``field``) after one ConfigRequest to ``service``."""
-    session = open_or_report(args)
+    # (a stop while the router is out of reach ends the command at once, status 0, as echo's
+    # does; after that the stop waits for the answer, at most --timeout)
+    session = open_or_report(args, stop_on_signals())
     if session is None:
         return 1, None
     key = Keys(args.namespace)(key_table.config_key(service))

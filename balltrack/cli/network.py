@@ -146,7 +146,7 @@ def command_status(args) -> int:
         if given:  # (ignored, a script would read the table as JSON, or wait on a router)
             print(f"balltrack status: {option}: only with --run-dir", file=sys.stderr)
             return 2
-    session = open_or_report(args)
+    session = open_or_report(args, stop_on_signals())  # (see cli/config.ask)
     if session is None:
         return 1
     alive, stats = service_status(session, args.namespace, args.timeout)
@@ -188,7 +188,7 @@ def command_sim(args) -> int:
     except (ConfigError, ValueError) as error:
         print(f"balltrack sim: {error}", file=sys.stderr)
         return 2
-    session = open_or_report(args)
+    session = open_or_report(args, stop_on_signals())  # (see cli/config.ask)
     if session is None:
         return 1
     reply = send_command(session, request, args.namespace, args.timeout)

@@ -273,7 +273,9 @@ def test_no_router_is_a_clear_error(tmp_path):
     assert result.returncode == 1 and f"cannot reach a Zenoh router at tcp/127.0.0.1:{port}:" in result.stderr
 
 
-@pytest.mark.parametrize("command", [["echo", "detected_ball"], ["topic", "list"]])
+@pytest.mark.parametrize("command", [["echo", "detected_ball"], ["topic", "list"],
+                                     # (these waited it out: SIGTERM killed them, status 143)
+                                     ["status"], ["config", "locator"], ["sim", "reset"]])
 def test_a_command_still_waiting_for_its_router_stops_at_once_on_sigterm(log_dir, command):
     # (nothing listens on that port: the command waits for its router up to --timeout, 60 s)
     process = Process([sys.executable, "-m", "balltrack", *command, "--connect", f"tcp/127.0.0.1:{free_port()}",
