@@ -66,7 +66,9 @@ def register(commands) -> None:
                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("images", nargs="+", metavar="IMAGE", help="photos of the board (or glob patterns)")
     parser.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
-    parser.add_argument("--square", type=number(above=0), required=True, help="side of one square (metres)")
+    # (a square of 1e308 m made OpenCV's calibration fail an assertion: a traceback)
+    parser.add_argument("--square", type=number(above=0, maximum=10), required=True,
+                        help="side of one square (metres, at most 10)")
     parser.add_argument("-o", "--output", default="camera.yaml", help="the YAML file to write (default camera.yaml)")
     parser.add_argument("--name", default="camera", help="camera_name written in the file")
     parser.set_defaults(handler=command_calibrate)

@@ -193,6 +193,11 @@ def write_calibration(path: str | Path, model: CameraModel) -> None:
 # ---------------------------------------------------------------------------------------------
 # Chessboard calibration.
 
+# Inner corners a side of a board can have (a printed board has a few dozen at most; OpenCV
+# takes only 32-bit sizes).
+MAX_BOARD_SIDE = 100
+
+
 def parse_board(text: str) -> tuple[int, int]:
     """``"9x6"`` -> (9, 6): inner corners per row and per column, as OpenCV counts them."""
     columns, separator, rows = text.lower().partition("x")
@@ -202,6 +207,8 @@ def parse_board(text: str) -> tuple[int, int]:
         size = (0, 0)
     if not separator or min(size) < 2:
         raise ValueError(f"board: expected inner corners as COLUMNSxROWS, e.g. 9x6, got {text!r}")
+    if max(size) > MAX_BOARD_SIDE:
+        raise ValueError(f"board: at most {MAX_BOARD_SIDE} inner corners a side, got {text!r}")
     return size
 
 

@@ -137,6 +137,9 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["secure", "init", "profile", "--hosts", "a", "--days", "0"], "--days: must be at least 1"),
     (["secure", "init", "profile", "--hosts", "a", "--days", "99999999"], "--days: must be at most 36500"),
     (["calibrate", "x.png", "--square", "0"], "--square: must be greater than 0"),
+    # (these were OpenCV's tracebacks: an overload it could not resolve, a failed assertion)
+    (["calibrate", "x.png", "--square", "0.02", "--board", "3000000000x6"], "board: at most 100 inner corners a side"),
+    (["calibrate", "x.png", "--square", "1e308"], "--square: must be at most 10"),
     (["calibrate", "x.png", "--square", "0.02", "-o", "no-such-folder/camera.yaml"],
      "no-such-folder/camera.yaml: cannot write (no-such-folder is no folder)"),
     # (what Zenoh refuses: one line naming the option, before any router is sought)
