@@ -47,7 +47,10 @@ def ask(args, service: str, request: dict, field: str = "config") -> tuple[int, 
             print(f"balltrack config: {answer.get('error')}", file=sys.stderr)
             return 2, None
         return 0, answer.get(field)
-    print(f"balltrack config: no {service} answered on {key}", file=sys.stderr)
+    # (a secure router's access control drops what a role may not ask, without a word)
+    unanswered = (f"; or the access control does not let role {args.role} ask it" if getattr(args, "secure", None)
+                  else "")
+    print(f"balltrack config: no {service} answered on {key}{unanswered}", file=sys.stderr)
     return 1, None
 
 

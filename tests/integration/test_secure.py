@@ -10,6 +10,7 @@ opens, and every message to or from it is dropped. Frames are small (160x120) to
 """
 
 import json
+import subprocess
 import sys
 import time
 
@@ -22,7 +23,7 @@ from balltrack.common.session import load_config_file, open_session, secure_clie
 from balltrack.common.status import liveliness_keys
 from balltrack.deploy.secure import init_profile, permissions
 from balltrack.services.simulator.control import send_command
-from tests.harness import Collector, Liveliness, Process, put_until
+from tests.harness import Collector, Liveliness, Process, process_environment, put_until
 
 SMALL = ("--set", "width=160", "--set", "height=120")
 # Opening a refused session waits this long (Zenoh retries the link until then).
@@ -324,3 +325,16 @@ def test_two_hosts_routers_join_and_keep_the_rules(tmp_path):
     for session in (simulator, follower, locator):
         session.close()
     assert [router.stop() for router in routers] == [0, 0]
+
+
+def test_a_config_query_the_access_control_drops_says_it_may_be_that(profile, simulator, secure_router):
+    # (it said only "no simulator answered", with the simulator alive and answering others)
+    connection = ["--secure", str(profile), "--connect", f"tls/localhost:{secure_router}", "--timeout", "2"]
+    viewer = subprocess.run([sys.executable, "-m", "balltrack", "config", "simulator", *connection, "--role", "viewer"],
+                            capture_output=True, text=True, timeout=60, env=process_environment())
+    assert viewer.returncode == 1
+    assert viewer.stderr == ("balltrack config: no simulator answered on simulator/config; or the access control "
+                             "does not let role viewer ask it\n")
+    operator = subprocess.run([sys.executable, "-m", "balltrack", "config", "simulator", *connection],
+                              capture_output=True, text=True, timeout=60, env=process_environment())
+    assert operator.returncode == 0 and json.loads(operator.stdout)["pacing"] == "realtime", operator.stderr
