@@ -338,3 +338,18 @@ def test_a_config_query_the_access_control_drops_says_it_may_be_that(profile, si
     operator = subprocess.run([sys.executable, "-m", "balltrack", "config", "simulator", *connection],
                               capture_output=True, text=True, timeout=60, env=process_environment())
     assert operator.returncode == 0 and json.loads(operator.stdout)["pacing"] == "realtime", operator.stderr
+
+
+def test_pub_warns_when_the_role_may_not_put_on_the_key(profile, secure_router):
+    # (it said "published 1 Twist" of a message the router dropped)
+    def pub(*role):
+        return subprocess.run([sys.executable, "-m", "balltrack", "pub", "cmd_vel", "{linear: [0, 0, 0], "
+                               "angular: [0, 0, 0]}", "--secure", str(profile), "--connect",
+                               f"tls/localhost:{secure_router}", *role], capture_output=True, text=True,
+                              timeout=60, env=process_environment())
+
+    viewer, operator = pub("--role", "viewer"), pub()
+    assert viewer.returncode == 0 and viewer.stderr.splitlines()[0] == (
+        "balltrack pub: warning: role viewer may not put on cmd_vel in the profile's access control: the router "
+        "drops these messages")
+    assert operator.returncode == 0 and "warning" not in operator.stderr, operator.stderr
