@@ -123,9 +123,11 @@ def _listen(session, expression: str, window: float, stop) -> dict[str, list[tup
         return dict(arrivals)
 
 
-def rate(samples: list[tuple[float, int]]) -> float:
+def rate(samples: list[tuple[float, int]], window: float) -> float:
+    """Messages per second: over the span of those seen, or (one seen, a 1 Hz key in a 1 s
+    window) as many as seen in ``window``."""
     if len(samples) < 2 or samples[-1][0] <= samples[0][0]:
-        return 0.0
+        return len(samples) / window
     return (len(samples) - 1) / (samples[-1][0] - samples[0][0])
 
 
@@ -162,7 +164,7 @@ def command_topic_list(args) -> int:
         publishers = ",".join(graph.who("publisher", key, keys)) or "-"
         subscribers = ",".join(graph.who("subscriber", key, keys)) or "-"
         if not out.line(f"{keys.strip(key):<28} {_message_type(graph.keys_of(key, keys), key):<12} "
-                        f"{rate(traffic.get(key, [])):>8.2f} {publishers:<24} {subscribers}"):
+                        f"{rate(traffic.get(key, []), args.window):>8.2f} {publishers:<24} {subscribers}"):
             break
     if out.closed:
         silence_closed_stdout()
@@ -193,7 +195,7 @@ def command_topic_info(args) -> int:
         "when": spec.when if spec else None,
         "publishers": publishers,
         "subscribers": subscribers,
-        "rate_hz": round(rate(samples), 3),
+        "rate_hz": round(rate(samples, args.window), 3),
         "messages_seen": len(samples),
         "mean_bytes": round(sum(sizes) / len(sizes), 1) if sizes else None,
         "window_s": args.window,

@@ -1,7 +1,7 @@
 """Who declared a key (``balltrack topic list/info``), from the router's admin space as
 ``Graph.query`` reads it, here filled in directly."""
 
-from balltrack.cli.introspect import Graph
+from balltrack.cli.introspect import Graph, rate
 from balltrack.common.keys import Keys
 
 JOINED, ALONE = "aaaaaaaaaaaa", "bbbbbbbbbbbb"  # a process of three services, and the simulator
@@ -42,3 +42,10 @@ def test_the_services_of_a_joined_process_are_told_apart_by_the_key():
     assert graph.keys_of("robot1/cmd_vel", root).namespace == "robot1"
     assert graph.who("publisher", "robot1/cmd_vel", root) == ["follower"]
     assert graph.keys_of("cmd_vel", root).namespace == "" and graph.keys_of("other/x", root).namespace == ""
+
+
+def test_a_key_seen_once_in_the_window_has_the_rate_of_one_per_window():
+    # (a 1 Hz key, camera_info or stats, in the default 1 s window: it showed 0.00)
+    assert rate([], 1.0) == 0.0
+    assert rate([(5.0, 10)], 1.0) == 1.0 and rate([(5.0, 10)], 2.0) == 0.5
+    assert rate([(5.0, 10), (5.5, 10), (6.0, 10)], 1.0) == 2.0
