@@ -155,13 +155,23 @@ class ServiceContext:
         self._config_listeners.append(listener)
 
     def set_config(self, changes: dict) -> Any:
-        new_config = replace_config(self._config, changes)
-        # (use_sim_time never: the service's clock is chosen at start)
+        live = "" if self.live_settings is None else f" (live: {', '.join(sorted(self.live_settings))})"
+
+        def start_only(name: str) -> bool:  # (use_sim_time never: the clock is chosen at start)
+            return name == "use_sim_time" or self.live_settings is not None and name not in self.live_settings
+
+        try:
+            new_config = replace_config(self._config, changes)
+        except ConfigError:
+            # (a start-only setting that is also invalid with the rest, width=320 without its
+            # height: that it cannot be changed here is the news)
+            fixed = [name for name in changes if name in vars(self._config) and start_only(name)]
+            if fixed:
+                raise ConfigError(f"{', '.join(fixed)}: can only be set at start{live}") from None
+            raise
         fixed = [name for name in vars(new_config)
-                 if (name == "use_sim_time" or self.live_settings is not None and name not in self.live_settings)
-                 and getattr(new_config, name) != getattr(self._config, name)]
+                 if start_only(name) and getattr(new_config, name) != getattr(self._config, name)]
         if fixed:
-            live = "" if self.live_settings is None else f" (live: {', '.join(sorted(self.live_settings))})"
             raise ConfigError(f"{', '.join(fixed)}: can only be set at start{live}")
         self._config = new_config
         for listener in self._config_listeners:

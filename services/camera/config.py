@@ -42,7 +42,7 @@ class CameraConfig:
     height: int = param(0, "frame height asked of a device (px); 0 = its default", low=0, high=8192)
     encoding: Encoding = param(Encoding.jpeg, "published image encoding: `jpeg`, `bgr8` or `rgb8`; can be "
                                               "changed live")
-    jpeg_quality: int = param(90, "JPEG quality (1-100)", low=1, high=100)
+    jpeg_quality: int = param(90, "JPEG quality (1-100); can be changed live", low=1, high=100)
     # Written by `balltrack calibrate`, or by ROS's camera_calibration.
     calibration: str = param("", "camera calibration file (ROS camera_info YAML: camera_matrix, plumb_bob "
                                  "distortion); empty = an ideal pinhole with `hfov`")

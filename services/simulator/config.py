@@ -45,15 +45,16 @@ class SimulatorConfig:
     # so runs are reproducible whatever the machine's load.
     pacing: Pacing = param(Pacing.realtime, "`realtime` (follows the wall clock), `fast` (as fast as it "
                                             "can) or `lockstep` (waits for the pipeline's answers: "
-                                            "reproducible)")
+                                            "reproducible); can be changed live")
     # (a frame waits for its time at the factor it was made with: at the slowest, 100 s)
-    real_time_factor: float = param(1.0, "simulated seconds per wall second in `realtime` pacing", low=0.01)
-    lockstep_timeout: float = param(0.5, "longest wait for the pipeline per frame in `lockstep` (wall s)",
-                                    above=0, high=60)
+    real_time_factor: float = param(1.0, "simulated seconds per wall second in `realtime` pacing; can be "
+                                              "changed live", low=0.01)
+    lockstep_timeout: float = param(0.5, "longest wait for the pipeline per frame in `lockstep` (wall s); "
+                                                   "can be changed live", above=0, high=60)
     # Frames whose clock crosses a multiple of 1 / lockstep_command_rate_hz simulated seconds
     # wait for the follower's cmd_vel of that tick (its timer rate, 10 Hz).
     lockstep_command_rate_hz: float = param(10.0, "in `lockstep`, the follower's timer rate whose commands "
-                                                  "are waited for", low=0.1, high=1000)
+                                                  "are waited for; can be changed live", low=0.1, high=1000)
     cmd_timeout: float = param(0.5, "safety stop: no cmd_vel for this long (simulated s) -> velocity 0",
                                above=0)
     max_linear: float = param(0.5, "commands are clamped to this forward speed (m/s)", above=0, high=10)
@@ -73,8 +74,9 @@ class SimulatorConfig:
     # to the detector (the simulator converts before the frame's delivery time). In the demo,
     # frame -> detected_ball_3d p50 9.0/9.6 -> 8.5/8.0 ms, the detector's handler 6.6/7.0 ->
     # 5.7/5.5 ms (two demos each, alternated, 2026-11-26).
-    encoding: Encoding = param(Encoding.bgr8, "published image encoding: `bgr8`, `rgb8` or `jpeg`")
-    jpeg_quality: int = param(90, "JPEG quality (1-100)", low=1, high=100)
+    encoding: Encoding = param(Encoding.bgr8, "published image encoding: `bgr8`, `rgb8` or `jpeg`; can be "
+                                              "changed live")
+    jpeg_quality: int = param(90, "JPEG quality (1-100); can be changed live", low=1, high=100)
     # Changing it live is how a test makes the follower search.
     publish_images: bool = param(True, "publish `camera/image_raw`; false stops the frames (a failed "
                                        "camera) while the world, clock and ground truth go on; can be "
@@ -112,3 +114,8 @@ class SimulatorConfig:
     def period(self) -> float:
         """Simulated seconds per camera frame."""
         return 1.0 / self.rate_hz
+
+
+# What a running simulator can change through simulator/config; the rest takes a restart.
+LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
+                 "encoding", "jpeg_quality", "publish_images"}

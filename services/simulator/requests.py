@@ -43,7 +43,9 @@ def light_level(name: str, value: Any) -> tuple[float, float, float]:
         level = finite_number(name, value)
         channels = (level, level, level)
     if any(not 0.0 <= channel <= 1.0 for channel in channels):
-        raise ValueError(f"{name}: values must be between 0 and 1, got {list(channels)}")
+        # (as it was given: a grey level is not shown as the triple it stands for)
+        raise ValueError(f"{name}: must be between 0 and 1, got {value!r}" if not isinstance(value, (list, tuple))
+                         else f"{name}: values must be between 0 and 1, got {list(channels)}")
     return channels
 
 

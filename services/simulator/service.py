@@ -41,14 +41,11 @@ from balltrack.common.messages import MessageError, decode, encode, header, shor
 from balltrack.common.context import ServiceContext
 from balltrack.common.runner import run_service
 from balltrack.common.status import liveliness_keys
-from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.config import LIVE_SETTINGS, SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate
 from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
 from balltrack.services.simulator.output_files import OutputFiles
 from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Simulation
-
-LIVE_SETTINGS = {"pacing", "real_time_factor", "lockstep_timeout", "lockstep_command_rate_hz",
-                 "encoding", "jpeg_quality", "publish_images"}
 
 
 def image_message(rgb, head: dict, config: SimulatorConfig) -> dict:

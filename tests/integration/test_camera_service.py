@@ -77,6 +77,9 @@ def test_photos_with_a_calibration_loop_in_order(session, launch, photos, tmp_pa
     refused = query_config(session, "camera", {"source": str(tmp_path / "other.mp4")})
     assert not refused["ok"] and refused["error"].startswith("source: can only be set at start (live: ")
     assert query_config(session, "camera")["config"]["source"] != str(tmp_path / "other.mp4")
+    # (and so is a width without its height: "give both or neither" was no news)
+    refused = query_config(session, "camera", {"width": "320"})
+    assert not refused["ok"] and refused["error"].startswith("width: can only be set at start (live: "), refused
     assert query_config(session, "camera", {"encoding": "jpeg"})["ok"]
     images.wait_for(lambda m: m[-1]["encoding"] == "jpeg", 10, "a jpeg frame")
     stats = Collector(session, "camera/stats", "Stats").wait_count(1, 5)[0]

@@ -3,6 +3,7 @@ all read the same declaration, for every service's config."""
 
 import dataclasses
 import enum
+import importlib
 import math
 import re
 import subprocess
@@ -256,3 +257,12 @@ def test_a_setting_that_would_stall_or_exhaust_a_service_is_refused(service, set
     name = setting.partition("=")[0]
     with pytest.raises(ConfigError, match=f"^{name}: must be"):
         load_config(CONFIGS[service], overrides=[setting])
+
+
+@pytest.mark.parametrize("service", ["camera", "simulator"])
+def test_the_settings_marked_live_are_those_a_running_service_changes(service):
+    # (the tables marked 2 of the simulator's 7 and 3 of the camera's 4)
+    live = importlib.import_module(f"balltrack.services.{service}.config").LIVE_SETTINGS
+    marked = {name for name, described in describe_config(CONFIGS[service]).items()
+              if described["meaning"].endswith("can be changed live")}
+    assert marked == live

@@ -50,7 +50,8 @@ def test_a_request_whose_form_passes_passes_the_request_check(request):
 @pytest.mark.parametrize("request_, reason", [
     ({"op": "set_light"}, "set_light: give diffuse and/or ambient"),
     ({"op": "set_light", "ambient": "abc"}, "ambient: expected a number, got 'abc'"),
-    ({"op": "set_light", "diffuse": 2}, "diffuse: values must be between 0 and 1, got [2.0, 2.0, 2.0]"),
+    ({"op": "set_light", "diffuse": 2}, "diffuse: must be between 0 and 1, got 2"),
+    ({"op": "set_light", "ambient": [0.1, 1.5, 0.1]}, "ambient: values must be between 0 and 1, got [0.1, 1.5, 0.1]"),
     ({"op": "place_ball", "position": [1, 2]}, "place_ball: missing 'id'"),
     ({"op": "place_ball", "id": "tennis", "position": 1}, "position: expected [x, y] or [x, y, z], got 1"),
     ({"op": "place_robot", "x": 1}, "place_robot: 'x' and 'y' are required"),
