@@ -20,11 +20,29 @@ def set_from_signal(event: threading.Event) -> None:
     threading.Thread(target=event.set, name="signal-stop", daemon=True).start()
 
 
+# SIGINT and SIGTERM that came while a process imported its code, before it had its stop
+# event (see catch_early_stops).
+_EARLY: list[int] = []
+
+
+def catch_early_stops() -> None:
+    """Keep SIGINT and SIGTERM from here until ``stop_on_signals``, which then sets its event
+    at once. A service's entry point calls it before importing the service (0.3-0.6 s:
+    zenoh, OpenCV, MuJoCo): a stop in that time killed it, status 143 in place of 0 (a
+    supervisor stopping a process that has just started), and a SIGINT inherited as ignored
+    (a process started in the background by a script) was lost. Call from the main thread."""
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, lambda number, _frame: _EARLY.append(number))
+
+
 def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
-    """Return an event that SIGINT and SIGTERM set (call from the main thread)."""
+    """Return an event that SIGINT and SIGTERM set (call from the main thread); already set
+    when one came since ``catch_early_stops``."""
     stop = stop or threading.Event()
     for signal_number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signal_number, lambda *_: set_from_signal(stop))
+    if _EARLY:
+        stop.set()
     return stop
 
 

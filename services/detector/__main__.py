@@ -2,7 +2,10 @@ import logging
 import os
 import sys
 
-from balltrack.services.detector.service import main
+from balltrack.common.shutdown import catch_early_stops
+
+catch_early_stops()  # (before the service's imports: a stop during them is not lost)
+from balltrack.services.detector.service import main  # noqa: E402
 
 status = main()
 # llvmlite's JIT (numba, the detector's compiled functions) can crash a process in its exit

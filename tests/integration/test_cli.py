@@ -383,3 +383,18 @@ def test_long_running_commands_stop_on_sigterm(router, session, log_dir, command
     process.popen.terminate()
     assert process.popen.wait(timeout=10) == 0, process.output()
     assert "Traceback" not in process.output()
+
+
+@pytest.mark.parametrize("command", [["run", "detector"], ["router", "--listen", "tcp/127.0.0.1:FREE"]])
+def test_a_stop_while_a_service_is_still_starting_ends_it_with_status_0(log_dir, command):
+    # (a SIGTERM before its imports were done killed it, status 143: a supervisor's "killed by
+    # SIGTERM" for a process stopped just after it started)
+    port = str(free_port())
+    arguments = [item.replace("FREE", port) for item in command]
+    if command[0] == "run":
+        arguments += ["--connect", f"tcp/127.0.0.1:{port}"]
+    process = Process([sys.executable, "-m", "balltrack", *arguments], log_dir / "starting.log")
+    process.wait_for_signal_handler(signal.SIGTERM, 30)  # (the early one: the imports go on)
+    process.popen.terminate()
+    assert process.popen.wait(timeout=30) == 0, process.output()
+    assert "Traceback" not in process.output()

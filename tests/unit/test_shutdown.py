@@ -3,12 +3,14 @@
 import signal
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 
 import pytest
 
 from balltrack.common.shutdown import stop_on_signals, terminate_as_interrupt
+from tests.harness import REPO, process_environment
 
 
 def test_a_signal_landing_inside_stop_wait_does_not_deadlock():
@@ -85,3 +87,20 @@ def test_a_stop_while_the_interpreter_shuts_down_keeps_the_status_once_ignored(i
     # (balltrack detect, SIGTERM in the tenth of a second after its last image: status 143)
     finished = subprocess.run([sys.executable, "-c", LATE_STOP, ignoring], capture_output=True, timeout=60)
     assert finished.returncode == status, finished.stderr
+
+
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])
+def test_a_stop_while_a_service_imports_its_code_sets_its_event_once_it_has_one(signal_name):
+    # (it killed the process, status 143, or with SIGINT inherited as ignored was lost)
+    script = textwrap.dedent(f"""
+        import os, signal
+        from balltrack.common.shutdown import catch_early_stops, stop_on_signals
+        catch_early_stops()
+        os.kill(os.getpid(), signal.{signal_name})
+        print(stop_on_signals().wait(5))
+    """)
+    ignored = signal.SIG_IGN if signal_name == "SIGINT" else signal.SIG_DFL
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                            cwd=REPO, env=process_environment(),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, ignored))
+    assert (result.returncode, result.stdout) == (0, "True\n"), result.stderr
