@@ -31,7 +31,7 @@ import textwrap
 import tomllib
 import typing
 from pathlib import Path
-from typing import Any, Iterable, TypeVar
+from typing import Any, Callable, Iterable, TypeVar
 
 from balltrack.common.keys import SERVICES
 from balltrack.common.messages import shorten
@@ -133,36 +133,37 @@ def _within(value: float, declared: Param) -> bool:
     return True
 
 
-def _checked(name: str, annotation: Any, value: Any) -> Any:
+def _checked(name: str, annotation: Any, value: Any, spelled: Callable[[Any], str] = repr) -> Any:
     """``value`` as the field's type (an int for a float field becomes a float, a string for a
-    choice field its member), or a one-line ConfigError naming the field."""
+    choice field its member), or a one-line ConfigError naming the field; ``spelled`` writes
+    the value in it (``_toml_text`` for a config file's: true, "12")."""
     origin = typing.get_origin(annotation)
     if origin is list:
         (item_type,) = typing.get_args(annotation) or (Any,)
         if not isinstance(value, list):
-            raise ConfigError(f"{name}: expected a list, got {value!r}")
-        return [_checked(name, item_type, item) for item in value]
+            raise ConfigError(f"{name}: expected a list, got {spelled(value)}")
+        return [_checked(name, item_type, item, spelled) for item in value]
     if annotation is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{name}: expected a boolean, got {value!r}")
+            raise ConfigError(f"{name}: expected a boolean, got {spelled(value)}")
     elif annotation is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{name}: expected an integer, got {value!r}")
+            raise ConfigError(f"{name}: expected an integer, got {spelled(value)}")
     elif annotation is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{name}: expected a number, got {value!r}")
+            raise ConfigError(f"{name}: expected a number, got {spelled(value)}")
         value = float(value)
         if not math.isfinite(value):
-            raise ConfigError(f"{name}: must be finite, got {value!r}")
+            raise ConfigError(f"{name}: must be finite, got {spelled(value)}")
     elif _is_choice(annotation):
         try:
             return annotation(value)
         except ValueError:
             raise ConfigError(f"{name}: must be one of {', '.join(choices(annotation))}, "
-                              f"got {value!r}") from None
+                              f"got {spelled(value)}") from None
     elif annotation is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{name}: expected a string, got {value!r}")
+            raise ConfigError(f"{name}: expected a string, got {spelled(value)}")
     return value
 
 
@@ -387,28 +388,6 @@ def read_config_file(path: str | Path, section: str | None = None) -> dict[str, 
     return settings
 
 
-def _toml_type_error(annotation: Any, value: Any) -> str | None:
-    """Why a TOML value does not suit a field of this type (None: it does). TOML values are
-    typed, unlike --set text: ``h_min = "12"`` is a string where a number belongs, and is
-    refused rather than read as one; messages spell values as TOML does (true, "12")."""
-    if typing.get_origin(annotation) is list:
-        if not isinstance(value, list):
-            return f"expected a list, got {_toml_text(value)}"
-        (item_type,) = typing.get_args(annotation) or (Any,)
-        return next(filter(None, (_toml_type_error(item_type, item) for item in value)), None)
-    if annotation is bool:
-        suits, wanted = isinstance(value, bool), "a boolean (true or false)"
-    elif annotation is int:
-        suits, wanted = isinstance(value, int) and not isinstance(value, bool), "an integer"
-    elif annotation is float:
-        suits, wanted = isinstance(value, (int, float)) and not isinstance(value, bool), "a number"
-    elif annotation is str or _is_choice(annotation):
-        suits, wanted = isinstance(value, str), "a string (in quotes)"
-    else:
-        return None
-    return None if suits else f"expected {wanted}, got {_toml_text(value)}"
-
-
 def _toml_text(value: Any) -> str:
     """A value as TOML writes it, shortened."""
     if isinstance(value, bool):
@@ -425,10 +404,14 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Iterabl
     if path:
         settings = read_config_file(path, section)
         types = _field_types(cls)
+        # (TOML values are typed, unlike --set text: `h_min = "12"` is a string where a number
+        # belongs, refused rather than read as one)
         for key, value in settings.items():
-            reason = _toml_type_error(types[key], value) if key in types else None
-            if reason:
-                raise ConfigError(f"{path}: {key}: {reason}")
+            if key in types:
+                try:
+                    _checked(key, types[key], value, _toml_text)
+                except ConfigError as error:
+                    raise ConfigError(f"{path}: {error}") from None
         changes.update(settings)
     changes.update(parse_overrides(overrides))
     return _apply(cls, {}, changes)
