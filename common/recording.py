@@ -28,6 +28,7 @@ Other channels (say Foxglove's own message types, next to the msgpack ones) go t
 :meth:`Recorder.add_channel` and :meth:`Recorder.write`.
 """
 
+import copy
 import json
 import os
 import threading
@@ -290,6 +291,8 @@ class RecordingFile:
                 raise RecordingError(f"{path} is not an MCAP file (no header record: "
                                      f"{one_line(error)})") from None
         self.size = os.fstat(self._file.fileno()).st_size
+        # What a file without a summary section gave when it was read whole (see ``summary``)
+        self._read_whole: Summary | None = None
 
     def close(self) -> None:
         self._file.close()
@@ -368,8 +371,11 @@ class RecordingFile:
             if rates:  # the summary has counts per channel, but not their first and last times
                 self._times(result)
             return result
-        self._times(result, count=True)
-        return result
+        # (read whole once: play asks for the channels, then the keys, then the times)
+        if self._read_whole is None:
+            self._times(result, count=True)
+            self._read_whole = result
+        return copy.deepcopy(self._read_whole)
 
     def _times(self, result: Summary, count: bool = False) -> None:
         by_topic = {channel.topic: channel for channel in result.channels}

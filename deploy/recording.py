@@ -115,7 +115,7 @@ class Recording:
                 self.counts.dropped += 1
                 return
             self.counts.received += 1
-            self._pending.append((str(sample.key_expr), payload, arrival, str(sample.encoding)))
+            self._pending.append((str(sample.key_expr), payload, arrival, sample.encoding))
             self._pending_bytes += len(payload)
             self._changed.notify_all()  # the writer, and wait_received
 
@@ -133,10 +133,13 @@ class Recording:
                 self._closing.wait(arrival / 1e9 + self._hold - time.time())
             key = self.keys.strip(topic)
             message_type = self.keys.message_of(topic)
-            if message_type is None and (encoding.startswith(CDR_KEY_ENCODING) or looks_like_cdr(payload)):
+            # (its text here, not in Zenoh's callback, which stays short)
+            named, _, ros_type = str(encoding).partition(";")
+            named_cdr = named == CDR_KEY_ENCODING
+            if message_type is None and (named_cdr or looks_like_cdr(payload)):
                 # (a ROS 2 message: the bridge names its type in the encoding, after the ";")
-                ros_type = encoding.partition(";")[2] if encoding.startswith(CDR_KEY_ENCODING) else ""
-                channel = self.recorder.cdr_channel(topic, key, self.keys.namespace, ros_type or None)
+                channel = self.recorder.cdr_channel(topic, key, self.keys.namespace,
+                                                    ros_type if named_cdr and ros_type else None)
                 self.recorder.write(channel, payload, arrival, arrival)
             else:
                 channel = self.recorder.msgpack_channel(topic, key, self.keys.namespace, message_type)
