@@ -65,13 +65,17 @@ class Ros2BridgeConfig:
         # Two routes on one key: the bridge would read back what it writes there, or take one
         # ROS type for another (a CompressedImage where an Image belongs), and reject half.
         routed: dict[str, str] = {}
-        for name, switches in ROUTE_SWITCHES.items():
-            if all(getattr(self, switch) for switch in switches):
+        for name in ROUTE_SWITCHES:
+            if self.routes(name):
                 key = self.ros_key(name)
                 if key in routed:
                     raise ConfigError(f"{name}: {getattr(self, name)!r} is also {routed[key]} (key {key!r}); "
                                       "two routes cannot share a topic")
                 routed[key] = name
+
+    def routes(self, topic_field: str) -> bool:
+        """Whether the route of one ROS topic field is on: its direction's switch and its own."""
+        return all(getattr(self, switch) for switch in ROUTE_SWITCHES[topic_field])
 
     def ros_key(self, topic_field: str) -> str:
         """The Zenoh key (without the service's namespace) of one ROS topic field."""
@@ -82,7 +86,8 @@ class Ros2BridgeConfig:
 MAX_NAME = 256
 TOPIC_FIELDS = ("detected_ball_topic", "detected_ball_3d_topic", "cmd_vel_topic", "image_topic",
                 "compressed_image_topic", "camera_info_topic")
-# Each topic field with the switches that turn its route on (the routes: ``service.ROUTES``).
+# Each topic field with the switches that turn its route on, its direction's then its own (the
+# routes: ``service.ROUTES``).
 ROUTE_SWITCHES = {"detected_ball_topic": ("to_ros", "out_detected_ball"),
                   "detected_ball_3d_topic": ("to_ros", "out_detected_ball_3d"),
                   "cmd_vel_topic": ("to_ros", "out_cmd_vel"),

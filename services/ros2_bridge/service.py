@@ -25,45 +25,45 @@ from balltrack.common import keys
 from balltrack.common.messages import MessageError, shorten
 from balltrack.common.context import ServiceContext, in_order
 from balltrack.common.runner import run_service
-from balltrack.services.ros2_bridge.config import Ros2BridgeConfig
+from balltrack.services.ros2_bridge.config import ROUTE_SWITCHES, Ros2BridgeConfig
 
 NAME = "ros2_bridge"
 
 
 @dataclass(frozen=True)
 class Route:
-    """One conversion: ``switch`` and ``direction`` name the config fields that turn it on,
-    ``topic`` the field holding the ROS topic; ``key``/``message`` are balltrack's side."""
+    """One conversion: ``topic`` names the config field holding the ROS topic (and, in
+    ``ROUTE_SWITCHES``, the fields that turn the route on); ``key``/``message`` are balltrack's
+    side."""
 
-    switch: str
-    direction: str
     topic: str
     key: str
     message: str
     convert: str
     ros_type: str  # the ROS side's message type (named in its samples' Zenoh encoding)
 
+    @property
+    def direction(self) -> str:
+        """``to_ros`` or ``from_ros``: the config field of the routes that way."""
+        return ROUTE_SWITCHES[self.topic][0]
+
 
 ROUTES = (
-    Route("out_detected_ball", "to_ros", "detected_ball_topic", keys.DETECTED_BALL, "Ball2D", "ball2d_to_ros",
-          "geometry_msgs/msg/Point"),
-    Route("out_detected_ball_3d", "to_ros", "detected_ball_3d_topic", keys.DETECTED_BALL_3D, "Ball3D",
-          "ball3d_to_ros", "geometry_msgs/msg/PointStamped"),
-    Route("out_cmd_vel", "to_ros", "cmd_vel_topic", keys.CMD_VEL, "Twist", "twist_to_ros",
-          "geometry_msgs/msg/Twist"),
-    Route("in_image", "from_ros", "image_topic", keys.IMAGE_RAW, "Image", "image_from_ros",
-          "sensor_msgs/msg/Image"),
-    Route("in_compressed_image", "from_ros", "compressed_image_topic", keys.IMAGE_RAW, "Image",
-          "compressed_image_from_ros", "sensor_msgs/msg/CompressedImage"),
-    Route("in_camera_info", "from_ros", "camera_info_topic", keys.CAMERA_INFO, "CameraInfo",
-          "camera_info_from_ros", "sensor_msgs/msg/CameraInfo"),
+    Route("detected_ball_topic", keys.DETECTED_BALL, "Ball2D", "ball2d_to_ros", "geometry_msgs/msg/Point"),
+    Route("detected_ball_3d_topic", keys.DETECTED_BALL_3D, "Ball3D", "ball3d_to_ros",
+          "geometry_msgs/msg/PointStamped"),
+    Route("cmd_vel_topic", keys.CMD_VEL, "Twist", "twist_to_ros", "geometry_msgs/msg/Twist"),
+    Route("image_topic", keys.IMAGE_RAW, "Image", "image_from_ros", "sensor_msgs/msg/Image"),
+    Route("compressed_image_topic", keys.IMAGE_RAW, "Image", "compressed_image_from_ros",
+          "sensor_msgs/msg/CompressedImage"),
+    Route("camera_info_topic", keys.CAMERA_INFO, "CameraInfo", "camera_info_from_ros",
+          "sensor_msgs/msg/CameraInfo"),
 )
 
 
 def active_routes(config: Ros2BridgeConfig) -> dict[Route, str]:
     """The routes ``config`` turns on, each with its ROS-side key (without the namespace)."""
-    return {route: config.ros_key(route.topic) for route in ROUTES
-            if getattr(config, route.direction) and getattr(config, route.switch)}
+    return {route: config.ros_key(route.topic) for route in ROUTES if config.routes(route.topic)}
 
 
 class Bridge:
