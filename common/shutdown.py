@@ -65,8 +65,15 @@ def terminate_as_interrupt():
     while a child process starts, a destructor) would be lost, and the command would run on:
     seen, frame_transport's run of 100,000 messages went on after a SIGTERM that landed in
     logging's at-fork hook. Such an interrupt is raised again INTERRUPT_AGAIN_S later (SIGALRM),
-    once the main thread is back in the block's own code."""
+    once the main thread is back in the block's own code.
+
+    A SIGINT inherited as ignored (a command started in the background by a script) raises
+    KeyboardInterrupt within the block too, as it stops a service (``stop_on_signals``):
+    left ignored, ``kill -INT`` did nothing."""
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    previous_interrupt = signal.getsignal(signal.SIGINT)
+    if previous_interrupt == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     previous_alarm = signal.signal(signal.SIGALRM, signal.default_int_handler)
     previous_hook = sys.unraisablehook
     armed = False
@@ -89,3 +96,5 @@ def terminate_as_interrupt():
             signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous_alarm)
         signal.signal(signal.SIGTERM, previous)
+        if previous_interrupt == signal.SIG_IGN:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -42,6 +42,18 @@ def test_terminate_as_interrupt_raises_keyboard_interrupt_then_restores_the_hand
     assert signal.getsignal(signal.SIGTERM) is before
 
 
+def test_a_sigint_inherited_as_ignored_interrupts_the_block_and_is_ignored_again_after():
+    # (balltrack experiment started in the background by a script: kill -INT did nothing)
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with terminate_as_interrupt():
+                signal.raise_signal(signal.SIGINT)
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 class InterruptedDestructor:
     """An object whose destructor is interrupted: Python reports that and goes on."""
 
