@@ -7,6 +7,21 @@ too). Times are integer nanoseconds on the wire; ``now()`` gives float seconds f
 
 import threading
 import time
+from typing import Callable
+
+# A wait on the wall clock whose length a setting changed live may alter (a timer's period, a
+# camera's rate, a simulator's real-time factor) reads it again at least this often, so that
+# the change applies within it, not after the old wait has run out.
+TIMER_SLICE_S = 0.5
+
+
+def wait_out(stop: threading.Event, remaining: Callable[[], float]) -> bool:
+    """Wait until ``remaining()`` (seconds, read again at least every TIMER_SLICE_S) is no
+    longer positive; True when ``stop`` was set first."""
+    while (left := remaining()) > 0:
+        if stop.wait(min(left, TIMER_SLICE_S)):
+            return True
+    return stop.is_set()
 
 
 class WallClock:

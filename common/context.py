@@ -15,7 +15,7 @@ import numpy as np
 import zenoh
 
 from balltrack.common import keys as key_table
-from balltrack.common.clock import SimClock, TimerTicks, WallClock
+from balltrack.common.clock import SimClock, TimerTicks, WallClock, wait_out
 from balltrack.common.config import ConfigError, replace_config
 from balltrack.common.keys import Keys
 from balltrack.common.messages import MessageError, decode, encode, shorten
@@ -26,9 +26,6 @@ from balltrack.common.messages import MessageError, decode, encode, shorten
 # frames ~0.2 ms sooner than a hand-over from a callback (demo, frame -> detected_ball p50 3.7
 # and 3.7 ms against 3.9 and 3.9, two runs each).
 LATEST_RING = 8
-# A wall-clock timer (ServiceContext.every) waits at most this long before it reads its period
-# again, so that a rate changed live applies within it.
-TIMER_SLICE_S = 0.5
 # Seconds spent, on this thread, in handlers that the current handler's puts called: with
 # several services in one process a put runs a subscriber of the same session at once, and
 # each service's processing time is its own (ServiceContext.process).
@@ -332,14 +329,10 @@ class ServiceContext:
         def wall_loop():
             last_tick = time.monotonic()
             run(callback)
-            while not self.stop.is_set():
-                # (the period is read again at least every TIMER_SLICE_S: a rate changed live
-                # takes effect then, not after the old period has run out)
-                current = period()
-                now = time.monotonic()
-                if now < last_tick + current:
-                    self.stop.wait(min(last_tick + current - now, TIMER_SLICE_S))
-                    continue
+            # (the period is read again while waiting: a rate changed live takes effect within
+            # TIMER_SLICE_S, not after the old period has run out)
+            while not wait_out(self.stop, lambda: last_tick + period() - time.monotonic()):
+                current, now = period(), time.monotonic()
                 # (on schedule; more than a period behind, the schedule starts again from now)
                 last_tick = last_tick + current if now - last_tick < 2 * current else now
                 run(callback)

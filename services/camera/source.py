@@ -22,6 +22,7 @@ from typing import Callable, Iterator
 import cv2
 import numpy as np
 
+from balltrack.common.clock import wait_out
 from balltrack.common.images import UnreadableImage, read_image
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".pnm"}
@@ -315,12 +316,26 @@ class FrameFeed:
             self.log.warning("video %s: %d of the %d frames its container states could be read; "
                              "the rest is damaged or missing", self.spec.target, self._since_rewind, stated)
 
+    def _wait_for_slot(self) -> bool:
+        """Wait for the next frame's time at ``rate()``; True when stopped first. A rate
+        changed live during the wait ends it: the frame goes now and the new rate counts
+        from it (at 0.01 Hz, the old wait would have lasted up to 100 s)."""
+        rate = self.rate()
+        due = self.clock() + self._pacer.delay(rate, self.clock())
+
+        def remaining() -> float:
+            if self.rate() != rate:
+                self._pacer = Pacer()
+                self._pacer.delay(self.rate(), self.clock())  # (books this frame, now)
+                return 0.0
+            return due - self.clock()
+
+        return wait_out(self.stop, remaining)
+
     def __iter__(self) -> Iterator[np.ndarray]:
         while not self.stop.is_set():
-            if not self.reader.live:
-                wait = self._pacer.delay(self.rate(), self.clock())
-                if wait > 0 and self.stop.wait(wait):
-                    return
+            if not self.reader.live and self._wait_for_slot():
+                return
             image = self.reader.read()
             # (A pass without one readable frame would loop forever: that ends too.)
             if image is None and not self.reader.live:

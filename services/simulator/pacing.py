@@ -127,17 +127,20 @@ class LockstepGate:
         with self._changed:
             self._changed.notify_all()
 
-    def wait_answer(self, seq: int, timeout: float) -> bool:
+    def wait_answer(self, seq: int, timeout: float | Callable[[], float]) -> bool:
         return self._wait("detector", lambda: self._answered_seq == seq, timeout)
 
-    def wait_command(self, time_ns: int, timeout: float) -> bool:
+    def wait_command(self, time_ns: int, timeout: float | Callable[[], float]) -> bool:
         return self._wait("follower", lambda: self._command_time == time_ns, timeout)
 
-    def _wait(self, service: str, done: Callable[[], bool], timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
+    def _wait(self, service: str, done: Callable[[], bool], timeout: float | Callable[[], float]) -> bool:
+        """``timeout``: seconds from the start of the wait, or a function giving them, read again
+        in every slice (``lockstep_timeout`` changed live applies to the wait under way)."""
+        started = time.monotonic()
+        limit = timeout if callable(timeout) else (lambda: timeout)
         with self._changed:
             while not (done() or service not in self._alive or self._stop.is_set()):
-                remaining = deadline - time.monotonic()
+                remaining = started + limit() - time.monotonic()
                 if remaining <= 0:
                     self.timeouts += 1
                     return False

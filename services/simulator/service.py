@@ -29,11 +29,13 @@ import collections
 import math
 import threading
 import time
+from typing import Callable
 
 import cv2
 import zenoh
 
 from balltrack.common import keys
+from balltrack.common.clock import wait_out
 from balltrack.common.images import bgr_to_message
 from balltrack.common.config import ConfigError
 from balltrack.common.memory import keep_freed_memory
@@ -149,14 +151,24 @@ def build(service: ServiceContext):
            else {"command_stamp": int(round(simulation.command_time * 1e9)),
                  "command_time": simulation.command_time})}
 
+    # The waits of a frame read the live settings again as they go (common.clock.wait_out), so
+    # that a real-time factor, a pacing or a lockstep timeout changed live applies to the wait
+    # under way: at real_time_factor 0.01 one frame's wait lasts up to 100 s.
+    def realtime_wait(delay: Callable[[SimulatorConfig], float]) -> None:
+        """Wait out ``delay(live settings)`` while the pacing stays realtime."""
+        wait_out(service.stop, lambda: delay(service.config) if service.config.pacing == "realtime" else 0.0)
+
+    def lockstep_timeout() -> float:
+        return service.config.lockstep_timeout
+
     def frame(config: SimulatorConfig, next_info: float) -> float:
         """Step, render, pace, publish one frame; returns when the next camera_info is due."""
         if config.pacing == "realtime":
             # A camera exposes just before it delivers. Rendering right after the last publish
             # would put the software rasteriser's threads on both cores while the detector works
             # on that frame (frame -> detected_ball_3d 8.0 ms p50 in the demo against 5.x).
-            service.stop.wait(pacer.start_delay(simulation.time + simulation.period,
-                                                config.real_time_factor, time.monotonic(), work.lead()))
+            realtime_wait(lambda live: pacer.start_delay(simulation.time + simulation.period,
+                                                         live.real_time_factor, time.monotonic(), work.lead()))
         started_work = time.perf_counter()
         with frame_lock:
             apply_commands()
@@ -177,8 +189,8 @@ def build(service: ServiceContext):
         work.add(time.perf_counter() - started_work)
         if config.pacing == "realtime":
             slips = pacer.slips
-            service.stop.wait(pacer.delay(now, config.real_time_factor, simulation.period,
-                                          time.monotonic()))
+            realtime_wait(lambda live: pacer.delay(now, live.real_time_factor, simulation.period,
+                                                   time.monotonic()))
             service.stats.count("dropped", pacer.slips - slips)
         else:
             pacer.reset()
@@ -192,12 +204,12 @@ def build(service: ServiceContext):
         # frames whose clock makes the follower's timer fire, once its command is applied.
         lockstep = config.pacing == "lockstep"
         if lockstep and image is not None and gate.alive("detector"):
-            gate.wait_answer(head["seq"], config.lockstep_timeout)
+            gate.wait_answer(head["seq"], lockstep_timeout)
         if service.stop.is_set():
             return next_info
         clocks.put({"stamp": head["stamp"]})
         if gate.follower_fires(head["stamp"], 1 / config.lockstep_command_rate_hz) and lockstep:
-            gate.wait_command(head["stamp"], config.lockstep_timeout)
+            gate.wait_command(head["stamp"], lockstep_timeout)
         meter.add(time.monotonic(), now)
         return next_info
 

@@ -14,7 +14,7 @@ import pytest
 from balltrack.common.messages import decode, encode, header
 from balltrack.services.simulator.control import send_command
 from balltrack.common.clock import TimerTicks
-from tests.harness import Collector, Liveliness, garbage_payloads, start_service
+from tests.harness import Collector, Liveliness, garbage_payloads, query_config, start_service
 
 SMALL = ("width=160", "height=120")
 PERIOD = 1 / 30
@@ -263,3 +263,16 @@ def test_bad_config_exits_2_recording_and_sigterm_exits_0(router, session, log_d
     records = [json.loads(line) for line in truth_log.read_text().splitlines()]
     assert len(records) >= 5 and [record["seq"] for record in records[:5]] == [1, 2, 3, 4, 5]
     assert video.stat().st_size > 1000
+
+
+def test_a_real_time_factor_changed_live_applies_to_the_frame_wait_under_way(session, start_simulator):
+    # (at 1 frame per simulated second and real_time_factor 0.01 the second frame is due 100 s
+    # after the first; the wait used to run that out whatever the factor became)
+    truths = Collector(session, "sim/ground_truth", "GroundTruth")
+    start_simulator(*SMALL, "rate_hz=1", "timestep=0.01", "publish_images=false", "pacing=realtime",
+                    "real_time_factor=0.01")
+    first = newest(truths)
+    reply = query_config(session, "simulator", {"real_time_factor": 1.0})
+    assert reply["ok"], reply
+    # (the wait reads the factor again within TIMER_SLICE_S, then the frames come 1 s apart)
+    wait_seq(truths, first["header"]["seq"] + 2, timeout=15)

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from balltrack.common.clock import TIMER_SLICE_S
 from balltrack.services.camera.config import CameraConfig
 from balltrack.services.camera.source import Capture, FrameFeed, ImageFiles, Pacer, SourceError, SourceSpec, parse_source
 
@@ -174,6 +175,31 @@ def test_looped_photos_keep_to_rate_hz_across_each_new_pass(tmp_path):
     # (one frame per 0.1 s, the passes back to back: a rewind used to cost a slot of its own)
     assert shown == [(0.0, 0), (0.1, 100), (0.2, 0), (0.3, 100), (0.4, 0), (0.5, 100)]
     assert feed.rewinds == 2
+
+
+def test_a_rate_changed_live_ends_the_wait_for_the_old_rate_s_next_frame(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((24, 32, 3), 100, np.uint8))
+    spec = parse_source(str(tmp_path))
+    settings = {"config": CameraConfig(source="x", loop=True, rate_hz=0.01)}
+
+    class ChangeAtOneSecond(SimulatedTime):
+        def wait(self, seconds: float) -> bool:
+            self.now += seconds
+            if self.now >= 1.0:  # (1 s into the wait for a frame due 100 s on)
+                settings["config"] = CameraConfig(source="x", loop=True, rate_hz=10.0)
+            return False
+
+    time_source = ChangeAtOneSecond()
+    feed = FrameFeed(spec, ImageFiles(spec.paths), lambda: settings["config"], time_source,
+                     clock=time_source.clock)
+    shown = []
+    for _image in feed:
+        shown.append(time_source.now)
+        if len(shown) == 3:
+            break
+    # (the wait reads the rate every TIMER_SLICE_S: the frame after the change comes by then)
+    assert shown[0] == 0.0 and 1.0 <= shown[1] <= 1.0 + TIMER_SLICE_S
+    assert shown[2] == pytest.approx(shown[1] + 0.1)
 
 
 def test_an_unreadable_photo_is_counted_once_across_passes_and_no_more_once_written(tmp_path):

@@ -82,6 +82,19 @@ def test_lockstep_gate_waits_for_the_answer_or_times_out():
     assert gate.timeouts == 1
 
 
+def test_a_lockstep_timeout_shortened_during_a_wait_ends_it():
+    gate = LockstepGate(threading.Event())
+    gate.set_alive("detector", True)
+    timeout = {"seconds": 60.0}
+    ended = []
+    waiter = threading.Thread(target=lambda: ended.append(gate.wait_answer(5, lambda: timeout["seconds"])))
+    waiter.start()
+    timeout["seconds"] = 0.05  # (lockstep_timeout changed live while the frame waits)
+    waiter.join(10)
+    assert not waiter.is_alive(), "the wait ran on to its old 60 s timeout"
+    assert ended == [False] and gate.timeouts == 1
+
+
 def test_lockstep_gate_follower_ticks_restart_with_a_new_follower():
     gate = LockstepGate(threading.Event())
     assert not gate.follower_fires(33_333_333, 0.1)  # no follower
