@@ -154,7 +154,10 @@ def command_topic_list(args) -> int:
     if snapshot is None:
         return 1
     keys, graph, traffic = snapshot
-    live = {key for key in graph.keys("publisher") | set(traffic)
+    # (as ros2 topic list: a key that only has subscribers is listed too; a subscriber's
+    # wildcard, a recorder's "**", is not a key)
+    subscribed = {key for key in graph.keys("subscriber") if "*" not in key}
+    live = {key for key in graph.keys("publisher") | subscribed | set(traffic)
             if not key.startswith("@") and (not keys.namespace or key.startswith(keys.namespace + "/"))}
     out = Output(stop_on_signals())
     if not graph.readable:

@@ -56,6 +56,8 @@ def test_topic_list_shows_types_publishers_subscribers_and_rates(router, locator
     assert message == "CameraInfo" and 5 < float(rate) < 60 and "locator" in subscribers.split(",")
     assert rows["detected_ball_3d"][1] == "Ball3D" and rows["detected_ball_3d"][3] == "locator"
     assert rows["locator/stats"][1] == "Stats" and rows["locator/stats"][3] == "locator"
+    # (no detector: a key with a subscriber only is listed, as ros2 topic list does)
+    assert rows["detected_ball"][1:] == ["Ball2D", "0.00", "-", "locator"]
 
 
 def test_topic_info_describes_one_key(router, locator, camera_info_stream):
