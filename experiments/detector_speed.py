@@ -72,6 +72,12 @@ PACED_PAUSE = 1.0 / 30.0
 SHRUNK_WIDTHS = (480, 320)
 
 
+# The "blobs" stage is split by blob size, the longer side of a blob's box (px): below each
+# of these. Large blobs cost the most each; how much of that is their pixels and how much the
+# number of steps their search takes is what the split shows.
+BLOB_SIZE_LIMITS = (16, 32, 64, 128)
+
+
 # The plain pipeline's stages, as ``PlainDetector.stage_times`` adds them up: the colour mask
 # (blur, HSV, CLAHE, inRange) and the Hough transform on it.
 PLAIN_STAGES = ("colour mask", "Hough")
@@ -290,6 +296,55 @@ def stage_breakdown(detector: BallDetector | PlainDetector, frames: list[np.ndar
     return {stage: {"all": mean_ms(per_frame, stage), "middle": mean_ms(middle, stage)} for stage in stages}
 
 
+def size_classes() -> list[tuple[str, str, int, float]]:
+    """The blob size classes of ``blob_breakdown``: (figure key, label, smallest, limit) for
+    the longer side of a blob's box, smallest <= side < limit (px), from BLOB_SIZE_LIMITS."""
+    edges = (0, *BLOB_SIZE_LIMITS, math.inf)
+    classes = []
+    for smallest, limit in zip(edges, edges[1:]):
+        if smallest == 0:
+            classes.append((f"under_{limit}", f"under {limit} px", smallest, limit))
+        elif limit == math.inf:
+            classes.append((f"{smallest}_up", f"{smallest} px and more", smallest, limit))
+        else:
+            classes.append((f"{smallest}_to_{limit - 1}", f"{smallest}-{limit - 1} px", smallest, limit))
+    return classes
+
+
+def blob_breakdown(detector: BallDetector, frames: list[np.ndarray],
+                   passes: int = 3) -> dict[str, dict[str, float]]:
+    """Where the "blobs" stage's time goes, by blob size (``size_classes``): per class, blobs
+    per frame, ms per frame and us per blob, over every frame; ``passes`` passes over the
+    frames in turn, each frame's call of median blob time (as ``stage_breakdown``)."""
+    calls: list[list[tuple[float, list[tuple[int, float]]]]] = [[] for _ in frames]
+    try:
+        for _ in range(passes):
+            for index, frame in enumerate(frames):
+                detector.blob_times = []
+                detector.detect(frame)
+                calls[index].append((sum(seconds for _, seconds in detector.blob_times), detector.blob_times))
+    finally:
+        detector.blob_times = None
+    blobs = [blob for frame_calls in calls
+             for blob in sorted(frame_calls, key=lambda call: call[0])[len(frame_calls) // 2][1]]
+    split = {}
+    for key, _, smallest, limit in size_classes():
+        seconds = [time for side, time in blobs if smallest <= side < limit]
+        split[key] = {"per_frame": len(seconds) / len(frames),
+                      "ms_per_frame": 1000 * sum(seconds) / len(frames),
+                      "us_per_blob": 1e6 * sum(seconds) / len(seconds) if seconds else 0.0}
+    return split
+
+
+def blob_rows(splits: dict[str, dict[str, dict[str, float]]]) -> list[list[str]]:
+    """Table rows (size class, then per set: blobs per frame, ms per frame, us per blob) of
+    ``blob_breakdown``s."""
+    return [[label, *(text for split in splits.values()
+                      for text in (f"{split[key]['per_frame']:.2f}", f"{split[key]['ms_per_frame']:.2f}",
+                                   f"{split[key]['us_per_blob']:.0f}"))]
+            for key, label, _, _ in size_classes()]
+
+
 def breakdown_rows(breakdowns: dict[str, dict[str, dict[str, float]]],
                    stages: tuple[str, ...] = STAGES) -> list[list[str]]:
     """Table rows (stage, then per set: all frames, middle fifth) of ``stage_breakdown``s."""
@@ -340,7 +395,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
         if photos is not None and (named := named_photo_frames(photos)):
             sets["photos"] = [frame for _, frame in named]
             groups["photos"] = [photo_set_name(photos, path) for path, _ in named]
-        rows, paced_rows, set_rows, breakdowns, plain_breakdowns = [], [], [], {}, {}
+        rows, paced_rows, set_rows, breakdowns, plain_breakdowns, blob_splits = [], [], [], {}, {}, {}
         for name, frames in sets.items():
             measured = measure(detectors, frames, repeats, groups=groups[name])
             by_group = measured.pop("by_group", {})
@@ -361,6 +416,10 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                                            f"renders, one call per {1000 * PACED_PAUSE:.0f} ms")[0])
             breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
             plain_breakdowns[name] = stage_breakdown(detectors["plain"], frames, passes, PLAIN_STAGES)
+            blob_splits[name] = blob_breakdown(detectors["balltrack"], frames, passes)
+            for size, figures_of in blob_splits[name].items():
+                for metric, value in figures_of.items():
+                    result.figure(f"{name}/blobs_by_size/{size}/{metric}", value)
             for kind, split in (("stage", breakdowns), ("plain_stage", plain_breakdowns)):
                 for stage, times in split[name].items():
                     result.figure(f"{name}/{kind}/{stage}/all_ms", times["all"])
@@ -406,6 +465,13 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      "over the frames, each frame's median call; middle fifth = the frames "
                      "nearest its median, which the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, "
                      "acceptance = 7, outline = 8-9 (see services/detector/detector.py):")
+        result.table(["blob size", *(f"{name}: {column}" for name in blob_splits
+                                     for column in ("blobs per frame", "ms per frame", "us per blob"))],
+                     blob_rows(blob_splits),
+                     "The blobs stage by blob size (the longer side of its box; each frame's call of "
+                     "median blob time). From one class to the next a blob has about 4x the pixels; "
+                     "its time grows less than that: much of it is the number of steps its search "
+                     "takes (proposals, fits, measurements), not its pixels:")
         result.table(["stage", *(f"{name}: {group}" for name in plain_breakdowns
                                  for group in ("all frames", "middle fifth"))],
                      breakdown_rows(plain_breakdowns, PLAIN_STAGES),

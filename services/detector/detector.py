@@ -125,6 +125,10 @@ class BallDetector:
         # When a dict, each call adds the seconds it spent in each of STAGES (profiling: which
         # stage a speed-up must come from; see experiments/detector_speed.py).
         self.stage_times: dict[str, float] | None = None
+        # When a list, each blob searched in steps 5-6 appends the longer side of its box (px of
+        # the frame as processed) and the seconds its search took (profiling: which blobs the
+        # "blobs" stage spends its time on; see experiments/detector_speed.py).
+        self.blob_times: list[tuple[int, float]] | None = None
         # Per acceptance round, a frame-size plane kept from call to call for its mask with the
         # accepted balls erased, and the box (left, top, right, bottom) outside which it is
         # still zero (see _explained_plane).
@@ -207,7 +211,11 @@ class BallDetector:
         search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
+            blob_started = time.perf_counter()
             measured.extend(contour_candidates(contour, search, shape_mask, self.config))
+            if self.blob_times is not None:
+                _, _, blob_width, blob_height = cv2.boundingRect(contour)
+                self.blob_times.append((max(blob_width, blob_height), time.perf_counter() - blob_started))
         self._lap("blobs", started)
         return self._accept(measured, search)
 

@@ -133,6 +133,16 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     for stage in STAGES:
         assert figures[f"detector_speed/renders/stage/{stage}/all_ms"] > 0
         assert figures[f"detector_speed/renders/stage/{stage}/middle_ms"] >= 0
+    # The blobs stage by blob size: each class's time is its blobs times their mean time, and
+    # the renders' ball is a blob of some class; together they are at most the blobs stage.
+    by_size = {key: {metric: figures[f"detector_speed/renders/blobs_by_size/{key}/{metric}"]
+                     for metric in ("per_frame", "ms_per_frame", "us_per_blob")}
+               for key, *_ in detector_speed.size_classes()}
+    assert len(by_size) == len(detector_speed.BLOB_SIZE_LIMITS) + 1
+    assert sum(split["per_frame"] for split in by_size.values()) >= 1
+    for split in by_size.values():
+        assert split["ms_per_frame"] == pytest.approx(split["per_frame"] * split["us_per_blob"] / 1000, rel=1e-3, abs=1e-5)
+    assert "The blobs stage by blob size" in report
     assert "Where the balltrack detector's time goes" in report
     # and the plain pipeline's: its colour mask and its Hough transform
     from balltrack.experiments.detector_speed import PLAIN_STAGES

@@ -120,6 +120,20 @@ def test_stage_times_split_a_call_among_the_stages_it_ran():
     assert BallDetector(DetectorConfig()).stage_times is None
 
 
+def test_blob_times_list_each_blob_searched_with_its_size():
+    profiled = BallDetector(DetectorConfig())
+    profiled.blob_times = []
+    profiled.stage_times = {}
+    # (two balls apart: two blobs, each about its diameter across)
+    profiled.detect(scene([(200.0, 240.0, 30.0), (460.0, 240.0, 12.0)]))
+    sizes = sorted(side for side, _ in profiled.blob_times)
+    assert len(sizes) == 2 and abs(sizes[0] - 25) <= 3 and abs(sizes[1] - 61) <= 3
+    assert all(seconds > 0 for _, seconds in profiled.blob_times)
+    assert sum(seconds for _, seconds in profiled.blob_times) <= profiled.stage_times["blobs"]
+    # Off by default: nothing is kept.
+    assert BallDetector(DetectorConfig()).blob_times is None
+
+
 def test_no_detection_on_ball_free_frames(detector):
     for seed in range(3):
         assert detector.detect(scene([], seed=seed)).detections == []
