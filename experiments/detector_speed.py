@@ -30,6 +30,8 @@ It then splits the balltrack detector's time by stage (``BallDetector.stage_time
 mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
 the ones its p50 reads; and the plain pipeline's, into its colour mask and its Hough transform
 (on the photos the mask is most of it, and the goal leaves the balltrack detector half of it).
+The balltrack detector's blobs stage is split once more by blob size (``blob_breakdown``,
+``BallDetector.blob_times``): blobs per frame and the time of each, by the longer side of its box.
 
 Example::
 
