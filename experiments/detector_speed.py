@@ -30,7 +30,7 @@ It then splits the balltrack detector's time by stage (``BallDetector.stage_time
 mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
 the ones its p50 reads; and the plain pipeline's, into its colour mask and its Hough transform
 (on the photos the mask is most of it, and the goal leaves the balltrack detector half of it).
-The balltrack detector's blobs stage is split once more by blob size (``blob_breakdown``,
+The balltrack detector's blobs stage is split once more by blob size (``blob_split``,
 ``BallDetector.blob_times``): blobs per frame and the time of each, by the longer side of its box.
 
 Example::
@@ -271,35 +271,44 @@ TITLE = "Detector speed against the paper's plain pipeline"
 
 
 def stage_breakdown(detector: BallDetector | PlainDetector, frames: list[np.ndarray], passes: int = 3,
-                    stages: tuple[str, ...] = STAGES) -> dict[str, dict[str, float]]:
+                    stages: tuple[str, ...] = STAGES,
+                    blobs: list[tuple[int, float]] | None = None) -> dict[str, dict[str, float]]:
     """Where a detector's time goes: per stage of ``stages`` (those its ``stage_times`` adds
     up), its mean ms per frame over every frame (``all``) and over the middle fifth of the
     frames by their total time (``middle``: the frames a p50 reads). ``passes`` passes over the
     frames in turn (a frame again at once would find its data in the caches), each frame's call
     of median total time; one detector alone (this splits the time, the ratio is measured
-    apart)."""
-    calls: list[list[tuple[float, dict[str, float]]]] = [[] for _ in frames]
+    apart). ``blobs``: a list to extend with the ``blob_times`` of those same calls (a
+    BallDetector's; see ``blob_split``)."""
+    calls: list[list[tuple[float, dict[str, float], list | None]]] = [[] for _ in frames]
     try:
         for _ in range(passes):
             for index, frame in enumerate(frames):
                 detector.stage_times = {}
+                if blobs is not None:
+                    detector.blob_times = []
                 detector.detect(frame)
-                calls[index].append((sum(detector.stage_times.values()), detector.stage_times))
+                calls[index].append((sum(detector.stage_times.values()), detector.stage_times,
+                                     detector.blob_times if blobs is not None else None))
     finally:
         detector.stage_times = None
+        if blobs is not None:
+            detector.blob_times = None
     per_frame = sorted((sorted(frame_calls, key=lambda call: call[0])[len(frame_calls) // 2]
                         for frame_calls in calls), key=lambda call: call[0])
+    if blobs is not None:
+        blobs.extend(blob for _, _, frame_blobs in per_frame for blob in frame_blobs)
     count = len(per_frame)
     middle = per_frame[2 * count // 5:max(2 * count // 5 + 1, 3 * count // 5)]
 
     def mean_ms(group, stage: str) -> float:
-        return 1000 * sum(times.get(stage, 0.0) for _, times in group) / len(group)
+        return 1000 * sum(times.get(stage, 0.0) for _, times, _ in group) / len(group)
 
     return {stage: {"all": mean_ms(per_frame, stage), "middle": mean_ms(middle, stage)} for stage in stages}
 
 
 def size_classes() -> list[tuple[str, str, int, float]]:
-    """The blob size classes of ``blob_breakdown``: (figure key, label, smallest, limit) for
+    """The blob size classes of ``blob_split``: (figure key, label, smallest, limit) for
     the longer side of a blob's box, smallest <= side < limit (px), from BLOB_SIZE_LIMITS."""
     edges = (0, *BLOB_SIZE_LIMITS, math.inf)
     classes = []
@@ -313,34 +322,22 @@ def size_classes() -> list[tuple[str, str, int, float]]:
     return classes
 
 
-def blob_breakdown(detector: BallDetector, frames: list[np.ndarray],
-                   passes: int = 3) -> dict[str, dict[str, float]]:
+def blob_split(blobs: list[tuple[int, float]], frame_count: int) -> dict[str, dict[str, float]]:
     """Where the "blobs" stage's time goes, by blob size (``size_classes``): per class, blobs
-    per frame, ms per frame and us per blob, over every frame; ``passes`` passes over the
-    frames in turn, each frame's call of median blob time (as ``stage_breakdown``)."""
-    calls: list[list[tuple[float, list[tuple[int, float]]]]] = [[] for _ in frames]
-    try:
-        for _ in range(passes):
-            for index, frame in enumerate(frames):
-                detector.blob_times = []
-                detector.detect(frame)
-                calls[index].append((sum(seconds for _, seconds in detector.blob_times), detector.blob_times))
-    finally:
-        detector.blob_times = None
-    blobs = [blob for frame_calls in calls
-             for blob in sorted(frame_calls, key=lambda call: call[0])[len(frame_calls) // 2][1]]
+    per frame, ms per frame and us per blob, of ``blobs`` (side, seconds; those of
+    ``stage_breakdown``'s calls on ``frame_count`` frames)."""
     split = {}
     for key, _, smallest, limit in size_classes():
         seconds = [time for side, time in blobs if smallest <= side < limit]
-        split[key] = {"per_frame": len(seconds) / len(frames),
-                      "ms_per_frame": 1000 * sum(seconds) / len(frames),
+        split[key] = {"per_frame": len(seconds) / frame_count,
+                      "ms_per_frame": 1000 * sum(seconds) / frame_count,
                       "us_per_blob": 1e6 * sum(seconds) / len(seconds) if seconds else 0.0}
     return split
 
 
 def blob_rows(splits: dict[str, dict[str, dict[str, float]]]) -> list[list[str]]:
     """Table rows (size class, then per set: blobs per frame, ms per frame, us per blob) of
-    ``blob_breakdown``s."""
+    ``blob_split``s."""
     return [[label, *(text for split in splits.values()
                       for text in (f"{split[key]['per_frame']:.2f}", f"{split[key]['ms_per_frame']:.2f}",
                                    f"{split[key]['us_per_blob']:.0f}"))]
@@ -416,9 +413,10 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                 paced = measure(detectors, frames, repeats, pause=PACED_PAUSE)
                 paced_rows.append(recorded(result, "renders_paced", len(frames), paced,
                                            f"renders, one call per {1000 * PACED_PAUSE:.0f} ms")[0])
-            breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes)
+            blobs: list[tuple[int, float]] = []
+            breakdowns[name] = stage_breakdown(detectors["balltrack"], frames, passes, blobs=blobs)
             plain_breakdowns[name] = stage_breakdown(detectors["plain"], frames, passes, PLAIN_STAGES)
-            blob_splits[name] = blob_breakdown(detectors["balltrack"], frames, passes)
+            blob_splits[name] = blob_split(blobs, len(frames))
             for size, figures_of in blob_splits[name].items():
                 for metric, value in figures_of.items():
                     result.figure(f"{name}/blobs_by_size/{size}/{metric}", value)
@@ -470,8 +468,8 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
         result.table(["blob size", *(f"{name}: {column}" for name in blob_splits
                                      for column in ("blobs per frame", "ms per frame", "us per blob"))],
                      blob_rows(blob_splits),
-                     "The blobs stage by blob size (the longer side of its box; each frame's call of "
-                     "median blob time). From one class to the next a blob has about 4x the pixels; "
+                     "The blobs stage by blob size (the longer side of its box; the same calls as "
+                     "the stages above). From one class to the next a blob has about 4x the pixels; "
                      "its time grows less than that: much of it is the number of steps its search "
                      "takes (proposals, fits, measurements), not its pixels:")
         result.table(["stage", *(f"{name}: {group}" for name in plain_breakdowns

@@ -142,6 +142,9 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     assert sum(split["per_frame"] for split in by_size.values()) >= 1
     for split in by_size.values():
         assert split["ms_per_frame"] == pytest.approx(split["per_frame"] * split["us_per_blob"] / 1000, rel=1e-3, abs=1e-5)
+    # (the same calls as the stage split: the blobs' own time is part of that stage's)
+    assert (sum(split["ms_per_frame"] for split in by_size.values())
+            <= figures["detector_speed/renders/stage/blobs/all_ms"] + 1e-3)
     assert "The blobs stage by blob size" in report
     assert "Where the balltrack detector's time goes" in report
     # and the plain pipeline's: its colour mask and its Hough transform
