@@ -29,6 +29,7 @@ numbers.
 """
 
 import json
+import math
 import os
 import sys
 import time
@@ -173,6 +174,40 @@ def meets_goal(scored: dict) -> bool:
     return scored["recall"] >= GOAL_RECALL and scored["false_positives_per_image"] <= GOAL_FALSE_POSITIVES
 
 
+def fewest_found(labelled: int) -> int:
+    """The fewest found balls of ``labelled`` that meet the recall goal (as ``meets_goal`` reads it)."""
+    needed = math.ceil(GOAL_RECALL * labelled)
+    while needed > 0 and (needed - 1) / labelled >= GOAL_RECALL:
+        needed -= 1
+    while needed < labelled and needed / labelled < GOAL_RECALL:
+        needed += 1
+    return needed
+
+
+def most_false_positives(images: int) -> int:
+    """The most false positives on ``images`` images that meet the goal (as ``meets_goal`` reads it)."""
+    allowed = math.floor(GOAL_FALSE_POSITIVES * images)
+    while allowed > 0 and allowed / images > GOAL_FALSE_POSITIVES:
+        allowed -= 1
+    while images and (allowed + 1) / images <= GOAL_FALSE_POSITIVES:
+        allowed += 1
+    return allowed
+
+
+def to_spare(scored: dict) -> tuple[int, int]:
+    """How far a set's figures are from the goal: the balls it could miss more, and the false
+    positives it could make more, and still meet it (negative: how many it is short). A change
+    to the detector that is not exact moved one to seven balls of a development set either way
+    in the trials the README names: what it has to clear."""
+    return (scored["found"] - fewest_found(scored["labelled"]),
+            most_false_positives(scored["images"]) - scored["false_positives"])
+
+
+def spare_text(scored: dict) -> str:
+    balls, false_positives = to_spare(scored)
+    return f"{balls:+d} balls, {false_positives:+d} FP"
+
+
 def score_sets(folders: list[Path], config: DetectorConfig, plain: bool = True,
                variant: Variant | None = None) -> dict[str, dict]:
     """Per set (folder name): ``{"balltrack": score_folder(...), "plain": ... or None}``;
@@ -193,15 +228,16 @@ def _figures(scored: dict | None) -> str:
 
 
 def summary_rows(scores: dict[str, dict]) -> list[list]:
-    """Per set: name, images, counted balls, balltrack's and the plain pipeline's figures, goal."""
+    """Per set: name, images, counted balls, balltrack's and the plain pipeline's figures,
+    balltrack's distance from the goal (``to_spare``) and the goal's verdict."""
     return [[name, both["balltrack"]["images"], both["balltrack"]["labelled"],
-             _figures(both["balltrack"]), _figures(both["plain"]),
+             _figures(both["balltrack"]), _figures(both["plain"]), spare_text(both["balltrack"]),
              "PASS" if meets_goal(both["balltrack"]) else "MISS"]
             for name, both in scores.items()]
 
 
 SUMMARY_HEADERS = ["set", "images", "balls >= 20 px", "balltrack: recall, false positives",
-                   "plain pipeline: recall, false positives", "goal"]
+                   "plain pipeline: recall, false positives", "balltrack: to spare", "goal"]
 
 
 def run(options) -> "ExperimentResult":
@@ -234,6 +270,9 @@ def run(options) -> "ExperimentResult":
                         "false_positives", "images", "median_ms"):
                 result.figure(f"{name}/{detector}/{key}", scored[key])
         ours = both["balltrack"]
+        balls, false_positives = to_spare(ours)
+        result.figure(f"{name}/balltrack/balls_to_spare", balls)
+        result.figure(f"{name}/balltrack/false_positives_to_spare", false_positives)
         result.goal(name, f"{name}: recall >= {percent(GOAL_RECALL, 0)} of balls >= {MIN_BALL_PX} px, "
                           f"<= {GOAL_FALSE_POSITIVES:.2f} false positives per image (default settings)",
                     f">= {percent(GOAL_RECALL, 0)}, <= {GOAL_FALSE_POSITIVES:.2f}",
@@ -358,9 +397,10 @@ def main(argv: list[str] | None = None) -> int:
         for name, both in scores.items():
             print_images(name, both["balltrack"])
     print(f"{SUMMARY_HEADERS[0]:<20} {SUMMARY_HEADERS[1]:>6} {'balls':>6}  {'balltrack':<36} "
-          f"{'plain pipeline':<36} goal (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
-    for name, images, balls, ours, plain, goal in summary_rows(scores):
-        print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {goal}")
+          f"{'plain pipeline':<36} {'to spare':<18} "
+          f"goal (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
+    for name, images, balls, ours, plain, spare, goal in summary_rows(scores):
+        print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {spare:<18} {goal}")
     if args.variants:
         print_variants(folders, config)
     if args.misses:

@@ -6,6 +6,8 @@ import json
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from balltrack.experiments import photo_variants, real_photos
 from balltrack.services.detector.config import DetectorConfig
@@ -53,6 +55,9 @@ def test_each_set_scored_by_both_detectors_with_the_goal(tmp_path):
     assert plain["images"] == 3 and plain["labelled"] == 2
     [row] = real_photos.summary_rows(scores)
     assert row[0] == "drawn" and row[-1] == "PASS"
+    # 2 of 2 balls found: a miss would leave 0.5 < 0.9; 0 false positives on 3 images: one
+    # would make 0.33 > 0.2
+    assert row[-2] == "+0 balls, +0 FP"
     assert real_photos.meets_goal({"recall": 0.9, "false_positives_per_image": 0.2})
     assert not real_photos.meets_goal({"recall": 0.89, "false_positives_per_image": 0.0})
     assert not real_photos.meets_goal({"recall": 1.0, "false_positives_per_image": 0.21})
@@ -154,3 +159,27 @@ def test_one_variant_is_scored_and_its_misses_listed_where_the_variant_moved_the
     assert exit.value.code == 2
     error = capsys.readouterr().err.strip()
     assert "--variant: invalid choice: 'upside down'" in error and "\n" not in error
+
+
+@given(st.integers(min_value=0, max_value=3000))
+def test_fewest_found_is_the_least_number_of_balls_that_meets_the_recall_goal(labelled):
+    needed = real_photos.fewest_found(labelled)
+    recall = needed / labelled if labelled else 1.0
+    assert real_photos.meets_goal({"recall": recall, "false_positives_per_image": 0.0})
+    if needed > 0:
+        assert not real_photos.meets_goal({"recall": (needed - 1) / labelled, "false_positives_per_image": 0.0})
+
+
+@given(st.integers(min_value=1, max_value=3000))
+def test_most_false_positives_is_the_most_that_meets_the_goal(images):
+    allowed = real_photos.most_false_positives(images)
+    assert real_photos.meets_goal({"recall": 1.0, "false_positives_per_image": allowed / images})
+    assert not real_photos.meets_goal({"recall": 1.0, "false_positives_per_image": (allowed + 1) / images})
+
+
+def test_to_spare_counts_the_balls_and_false_positives_a_set_can_still_lose_or_add():
+    # 78 of 86 balls (78 needed: 77 / 86 = 0.895), 15 false positives on 86 images (17 allowed)
+    assert real_photos.to_spare({"found": 78, "labelled": 86, "false_positives": 15, "images": 86}) == (0, 2)
+    # short of the goal: negative
+    assert real_photos.to_spare({"found": 8, "labelled": 10, "false_positives": 3, "images": 10}) == (-1, -1)
+    assert real_photos.spare_text({"found": 8, "labelled": 10, "false_positives": 3, "images": 10}) == "-1 balls, -1 FP"
