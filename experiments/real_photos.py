@@ -175,21 +175,32 @@ def meets_goal(scored: dict) -> bool:
 
 
 def fewest_found(labelled: int) -> int:
-    """The fewest found balls of ``labelled`` that meet the recall goal (as ``meets_goal`` reads it)."""
+    """The fewest found balls of ``labelled`` that ``meets_goal`` passes (its recall check;
+    started from the goal's share, then moved past float rounding by asking it)."""
+    def passes(found: int) -> bool:
+        return meets_goal({"recall": found / labelled if labelled else 1.0, "false_positives_per_image": 0.0})
+
     needed = math.ceil(GOAL_RECALL * labelled)
-    while needed > 0 and (needed - 1) / labelled >= GOAL_RECALL:
+    while needed > 0 and passes(needed - 1):
         needed -= 1
-    while needed < labelled and needed / labelled < GOAL_RECALL:
+    while not passes(needed):
         needed += 1
     return needed
 
 
 def most_false_positives(images: int) -> int:
-    """The most false positives on ``images`` images that meet the goal (as ``meets_goal`` reads it)."""
+    """The most false positives on ``images`` images that ``meets_goal`` passes (its false
+    positives check; found as ``fewest_found`` is)."""
+    if not images:
+        return 0
+
+    def passes(false_positives: int) -> bool:
+        return meets_goal({"recall": 1.0, "false_positives_per_image": false_positives / images})
+
     allowed = math.floor(GOAL_FALSE_POSITIVES * images)
-    while allowed > 0 and allowed / images > GOAL_FALSE_POSITIVES:
+    while allowed > 0 and not passes(allowed):
         allowed -= 1
-    while images and (allowed + 1) / images <= GOAL_FALSE_POSITIVES:
+    while passes(allowed + 1):
         allowed += 1
     return allowed
 
@@ -198,7 +209,7 @@ def to_spare(scored: dict) -> tuple[int, int]:
     """How far a set's figures are from the goal: the balls it could miss more, and the false
     positives it could make more, and still meet it (negative: how many it is short). A change
     to the detector that is not exact moved one to seven balls of a development set either way
-    in the trials the README names: what it has to clear."""
+    in six trials (see the README's real_photos paragraph): what such a change has to clear."""
     return (scored["found"] - fewest_found(scored["labelled"]),
             most_false_positives(scored["images"]) - scored["false_positives"])
 
