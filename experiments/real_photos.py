@@ -214,6 +214,57 @@ def to_spare(scored: dict) -> tuple[int, int]:
             most_false_positives(scored["images"]) - scored["false_positives"])
 
 
+# Resampling a set's images (``resampled``): how many same-size sets are drawn, and the seed
+# that draws them (the same figures on every run).
+RESAMPLES = 2000
+RESAMPLE_SEED = 9
+# The share of the resampled figures an interval leaves out, half below it and half above.
+INTERVAL_OUTSIDE = 0.05
+
+
+def resampled(scored: dict, resamples: int = RESAMPLES, seed: int = RESAMPLE_SEED) -> dict:
+    """How much a set's figures owe to which photos it happens to hold: ``resamples`` sets of
+    as many images, drawn with replacement from its scored images (balls, found balls and
+    false positives of an image stay together: the balls of one photo share its light and its
+    floor), each scored as the set is.
+
+    Returns the 95 % intervals of the recall and of the false positives per image
+    (``recall_low``, ``recall_high``, ``false_positives_low``, ``false_positives_high``) and
+    ``pass_share``, the share of the drawn sets that ``meets_goal`` passes: about how often a
+    larger set of photos like these would pass, were the detector as good on it as on these
+    (it was tuned on these, so if anything less often). A set of no image gives its own figures
+    and a pass share of 0 or 1."""
+    entries = list(scored["files"].values())
+    if not entries:
+        share = 1.0 if meets_goal(scored) else 0.0
+        return {"recall_low": scored["recall"], "recall_high": scored["recall"],
+                "false_positives_low": scored["false_positives_per_image"],
+                "false_positives_high": scored["false_positives_per_image"], "pass_share": share}
+    counts = np.array([[entry["labelled"], entry["found"], entry["false_positives"]] for entry in entries],
+                      np.int64)
+    drawn = np.random.default_rng(seed).integers(0, len(entries), size=(resamples, len(entries)))
+    labelled, found, false_positives = (counts[:, column][drawn].sum(axis=1) for column in range(3))
+    recalls = np.where(labelled > 0, found / np.maximum(labelled, 1), 1.0)
+    per_image = false_positives / len(entries)
+    passed = sum(meets_goal({"recall": float(recall), "false_positives_per_image": float(rate)})
+                 for recall, rate in zip(recalls, per_image))
+    tails = (INTERVAL_OUTSIDE / 2, 1 - INTERVAL_OUTSIDE / 2)
+    recall_low, recall_high = np.quantile(recalls, tails)
+    false_positives_low, false_positives_high = np.quantile(per_image, tails)
+    return {"recall_low": float(recall_low), "recall_high": float(recall_high),
+            "false_positives_low": float(false_positives_low),
+            "false_positives_high": float(false_positives_high), "pass_share": passed / resamples}
+
+
+def resampled_text(scored: dict) -> tuple[str, str, str]:
+    """``resampled``'s figures as the summary prints them: the recall interval, the false
+    positives' interval and the pass share."""
+    figures = resampled(scored)
+    return (f"{figures['recall_low']:.3f}-{figures['recall_high']:.3f}",
+            f"{figures['false_positives_low']:.2f}-{figures['false_positives_high']:.2f}",
+            f"{100 * figures['pass_share']:.0f} %")
+
+
 def spare_text(scored: dict) -> str:
     balls, false_positives = to_spare(scored)
     return f"{balls:+d} balls, {false_positives:+d} FP"
@@ -246,6 +297,14 @@ def summary_rows(scores: dict[str, dict]) -> list[list]:
              "PASS" if meets_goal(both["balltrack"]) else "MISS"]
             for name, both in scores.items()]
 
+
+def resampled_rows(scores: dict[str, dict]) -> list[list[str]]:
+    """Per set: name and the balltrack figures' ``resampled_text``."""
+    return [[name, *resampled_text(both["balltrack"])] for name, both in scores.items()]
+
+
+RESAMPLED_HEADERS = ["set", "balltrack: recall, 95 % interval", "false positives per image, 95 % interval",
+                     f"resampled sets meeting the goal (of {RESAMPLES})"]
 
 SUMMARY_HEADERS = ["set", "images", "balls >= 20 px", "balltrack: recall, false positives",
                    "plain pipeline: recall, false positives", "balltrack: to spare", "goal"]
@@ -284,6 +343,8 @@ def run(options) -> "ExperimentResult":
         balls, false_positives = to_spare(ours)
         result.figure(f"{name}/balltrack/balls_to_spare", balls)
         result.figure(f"{name}/balltrack/false_positives_to_spare", false_positives)
+        for key, value in resampled(ours).items():
+            result.figure(f"{name}/balltrack/resampled/{key}", value)
         result.goal(name, f"{name}: recall >= {percent(GOAL_RECALL, 0)} of balls >= {MIN_BALL_PX} px, "
                           f"<= {GOAL_FALSE_POSITIVES:.2f} false positives per image (default settings)",
                     f">= {percent(GOAL_RECALL, 0)}, <= {GOAL_FALSE_POSITIVES:.2f}",
@@ -293,6 +354,12 @@ def run(options) -> "ExperimentResult":
                        f"false positives per image ({ours['images']} images)")
     result.table(SUMMARY_HEADERS, summary_rows(scores),
                  "Per set, the balltrack detector beside the paper's plain pipeline on the same photos:")
+    result.table(RESAMPLED_HEADERS, resampled_rows(scores),
+                 f"How much the balltrack figures owe to which photos a set holds: {RESAMPLES} sets "
+                 f"of as many images drawn with replacement from each (an image's balls stay "
+                 f"together), scored alike. The intervals hold the middle 95 % of their figures; "
+                 f"the last column, about how often a larger set of such photos would pass, were "
+                 f"the detector as good on it as on these, which it was tuned on (see resampled):")
     if not options.quick:
         result.table(["variant"] + list(scores), variant_rows(folders, config),
                      "How the balltrack figures hold up on altered copies of the photos (see "
@@ -412,6 +479,10 @@ def main(argv: list[str] | None = None) -> int:
           f"goal (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
     for name, images, balls, ours, plain, spare, goal in summary_rows(scores):
         print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {spare:<18} {goal}")
+    print(f"\n{'set':<20} {'balltrack: recall, 95 % interval':<34} {'FP per image, 95 % interval':<29} "
+          f"resampled sets meeting the goal ({RESAMPLES}, images drawn with replacement)")
+    for name, recall, false_positives, share in resampled_rows(scores):
+        print(f"{name:<20} {recall:<34} {false_positives:<29} {share}")
     if args.variants:
         print_variants(folders, config)
     if args.misses:

@@ -67,7 +67,10 @@ def test_command_line_summary_and_bad_folder(tmp_path, capsys):
     write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)]])
     assert real_photos.main([str(tmp_path), "--summary", "--no-plain"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 2 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
+    assert len(lines) == 5 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
+    # then how the figures hold up when the set's images are drawn again (one image: always it)
+    assert lines[2] == "" and lines[3].startswith("set") and "resampled sets meeting the goal" in lines[3]
+    assert lines[4].split() == ["drawn", "1.000-1.000", "0.00-0.00", "100", "%"]
     assert real_photos.main([str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err.strip() == f"{tmp_path / 'missing'}: no such file or folder"
     # A set's labels.json names its set; another file is refused as one.
@@ -104,6 +107,8 @@ def test_experiment_reports_a_goal_per_set(tmp_path):
     assert all(goal.passed for goal in result.goals)
     assert result.figures["real_photos/one/balltrack/recall"] == 1.0
     assert "real_photos/two/plain/recall" in result.figures
+    assert result.figures["real_photos/one/balltrack/resampled/pass_share"] == 1.0
+    assert result.figures["real_photos/two/balltrack/resampled/recall_low"] == 1.0
 
 
 def test_variants_move_the_boxes_with_the_image():
@@ -183,3 +188,60 @@ def test_to_spare_counts_the_balls_and_false_positives_a_set_can_still_lose_or_a
     # short of the goal: negative
     assert real_photos.to_spare({"found": 8, "labelled": 10, "false_positives": 3, "images": 10}) == (-1, -1)
     assert real_photos.spare_text({"found": 8, "labelled": 10, "false_positives": 3, "images": 10}) == "-1 balls, -1 FP"
+
+
+def scored_images(per_image: list[tuple[int, int, int]]) -> dict:
+    """A scored set (as ``score_folder`` returns it) of images with these (counted balls, found,
+    false positives)."""
+    files = {f"{index}.png": {"labelled": labelled, "found": found, "false_positives": false_positives}
+             for index, (labelled, found, false_positives) in enumerate(per_image)}
+    labelled = sum(entry[0] for entry in per_image)
+    found = sum(entry[1] for entry in per_image)
+    false_positives = sum(entry[2] for entry in per_image)
+    return {"files": files, "labelled": labelled, "found": found, "false_positives": false_positives,
+            "images": len(per_image), "recall": found / labelled if labelled else 1.0,
+            "false_positives_per_image": false_positives / len(per_image) if per_image else 0.0}
+
+
+def test_resampled_sets_of_alike_images_have_the_sets_own_figures():
+    figures = real_photos.resampled(scored_images([(2, 2, 0)] * 20))
+    assert figures == {"recall_low": 1.0, "recall_high": 1.0, "false_positives_low": 0.0,
+                       "false_positives_high": 0.0, "pass_share": 1.0}
+    figures = real_photos.resampled(scored_images([(3, 2, 1)] * 20))
+    assert figures["recall_low"] == figures["recall_high"] == pytest.approx(2 / 3)
+    assert figures["false_positives_low"] == figures["false_positives_high"] == 1.0
+    assert figures["pass_share"] == 0.0
+    assert real_photos.resampled(scored_images([]))["pass_share"] == 1.0  # (no ball, no image: meets it)
+
+
+def test_resampled_figures_spread_around_a_set_at_the_goals_edge():
+    # 90 balls, 9 missed, each in an image of its own: recall 0.9, just enough
+    at_edge = scored_images([(1, 1, 0)] * 81 + [(1, 0, 0)] * 9)
+    assert real_photos.meets_goal(at_edge)
+    figures = real_photos.resampled(at_edge)
+    assert figures["recall_low"] < 0.9 < figures["recall_high"] <= 1.0
+    # a resampled set passes when it drew at most its share of the missed images: about half do
+    assert 0.3 < figures["pass_share"] < 0.7
+    assert real_photos.resampled(at_edge) == figures  # (seeded: the same on every run)
+    assert real_photos.resampled(at_edge, seed=10) != figures
+    # the same set with a ball to spare in every resample is surer
+    assert real_photos.resampled(scored_images([(1, 1, 0)] * 88 + [(1, 0, 0)] * 2))["pass_share"] > 0.99
+
+
+@given(st.lists(st.tuples(st.integers(0, 5), st.integers(0, 5), st.integers(0, 3)), min_size=1, max_size=40))
+def test_resampled_figures_are_shares_and_ordered_intervals(per_image):
+    per_image = [(labelled, min(found, labelled), false_positives) for labelled, found, false_positives in per_image]
+    figures = real_photos.resampled(scored_images(per_image), resamples=200)
+    assert 0.0 <= figures["recall_low"] <= figures["recall_high"] <= 1.0
+    assert 0.0 <= figures["false_positives_low"] <= figures["false_positives_high"] <= 3.0
+    assert 0.0 <= figures["pass_share"] <= 1.0
+
+
+def test_specks_turn_a_share_of_the_pixels_black_or_white():
+    grey = np.full((200, 300, 3), 100, np.uint8)
+    speckled, boxes = photo_variants.speckled(0.02)(grey, [{"x": 1.0, "y": 2.0, "w": 3.0, "h": 4.0}])
+    assert boxes == [{"x": 1.0, "y": 2.0, "w": 3.0, "h": 4.0}]
+    black, white = (speckled == 0).all(axis=2).mean(), (speckled == 255).all(axis=2).mean()
+    assert 0.008 < black < 0.012 and 0.008 < white < 0.012
+    assert (speckled == 100).all(axis=2).mean() == pytest.approx(1 - black - white)
+    assert np.array_equal(speckled, photo_variants.speckled(0.02)(grey, [])[0])
