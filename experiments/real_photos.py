@@ -432,7 +432,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the full result as JSON")
     parser.add_argument("--variants", action="store_true",
                         help="also score altered copies of the photos (mirrored, smaller, exposure, "
-                             "white balance, JPEG, noise: see photo_variants.py), balltrack only")
+                             "white balance, JPEG, noise, specks: see photo_variants.py), balltrack only")
     parser.add_argument("--misses", action="store_true",
                         help="also list each counted ball the balltrack detector misses, with why "
                              "(the colour there, or the checks its candidate failed)")
