@@ -158,8 +158,7 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
     false_positives = sum(entry["false_positives"] for entry in files.values())
     timings.sort()
     return {
-        "recall": found / labelled if labelled else 1.0,
-        "false_positives_per_image": false_positives / len(files) if files else 0.0,
+        **rates(labelled, found, false_positives, len(files)),
         "found": found,
         "labelled": labelled,
         "false_positives": false_positives,
@@ -167,6 +166,13 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
         "median_ms": timings[len(timings) // 2] if timings else 0.0,
         "files": files,
     }
+
+
+def rates(labelled: int, found: int, false_positives: int, images: int) -> dict[str, float]:
+    """A set's ``recall`` (1 with no counted ball) and ``false_positives_per_image`` (0 with no
+    image), from its counts."""
+    return {"recall": found / labelled if labelled else 1.0,
+            "false_positives_per_image": false_positives / images if images else 0.0}
 
 
 def meets_goal(scored: dict) -> bool:
@@ -243,23 +249,22 @@ def resampled(scored: dict, resamples: int = RESAMPLES, seed: int = RESAMPLE_SEE
     counts = np.array([[entry["labelled"], entry["found"], entry["false_positives"]] for entry in entries],
                       np.int64)
     drawn = np.random.default_rng(seed).integers(0, len(entries), size=(resamples, len(entries)))
-    labelled, found, false_positives = (counts[:, column][drawn].sum(axis=1) for column in range(3))
-    recalls = np.where(labelled > 0, found / np.maximum(labelled, 1), 1.0)
-    per_image = false_positives / len(entries)
-    passed = sum(meets_goal({"recall": float(recall), "false_positives_per_image": float(rate)})
-                 for recall, rate in zip(recalls, per_image))
+    sums = counts[drawn].sum(axis=1)  # (per drawn set: its counted balls, found balls, false positives)
+    drawn_sets = [rates(int(labelled), int(found), int(false_positives), len(entries))
+                  for labelled, found, false_positives in sums]
+    passed = sum(meets_goal(figures) for figures in drawn_sets)
     tails = (INTERVAL_OUTSIDE / 2, 1 - INTERVAL_OUTSIDE / 2)
-    recall_low, recall_high = np.quantile(recalls, tails)
-    false_positives_low, false_positives_high = np.quantile(per_image, tails)
+    recall_low, recall_high = np.quantile([figures["recall"] for figures in drawn_sets], tails)
+    false_positives_low, false_positives_high = np.quantile(
+        [figures["false_positives_per_image"] for figures in drawn_sets], tails)
     return {"recall_low": float(recall_low), "recall_high": float(recall_high),
             "false_positives_low": float(false_positives_low),
             "false_positives_high": float(false_positives_high), "pass_share": passed / resamples}
 
 
-def resampled_text(scored: dict) -> tuple[str, str, str]:
+def resampled_text(figures: dict) -> tuple[str, str, str]:
     """``resampled``'s figures as the summary prints them: the recall interval, the false
     positives' interval and the pass share."""
-    figures = resampled(scored)
     return (f"{figures['recall_low']:.3f}-{figures['recall_high']:.3f}",
             f"{figures['false_positives_low']:.2f}-{figures['false_positives_high']:.2f}",
             f"{100 * figures['pass_share']:.0f} %")
@@ -298,9 +303,14 @@ def summary_rows(scores: dict[str, dict]) -> list[list]:
             for name, both in scores.items()]
 
 
-def resampled_rows(scores: dict[str, dict]) -> list[list[str]]:
-    """Per set: name and the balltrack figures' ``resampled_text``."""
-    return [[name, *resampled_text(both["balltrack"])] for name, both in scores.items()]
+def resampled_rows(resampled_sets: dict[str, dict]) -> list[list[str]]:
+    """Per set: name and the ``resampled_text`` of its ``resampled`` figures."""
+    return [[name, *resampled_text(figures)] for name, figures in resampled_sets.items()]
+
+
+def resampled_balltrack(scores: dict[str, dict]) -> dict[str, dict]:
+    """Per set: ``resampled`` of its balltrack figures."""
+    return {name: resampled(both["balltrack"]) for name, both in scores.items()}
 
 
 RESAMPLED_HEADERS = ["set", "balltrack: recall, 95 % interval", "false positives per image, 95 % interval",
@@ -334,6 +344,7 @@ def run(options) -> "ExperimentResult":
                        "false positive": "a detection centre in no box",
                        "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles (same settings)"}
     result.figure("skipped", False)
+    resampled_sets = resampled_balltrack(scores)
     for name, both in scores.items():
         for detector, scored in both.items():
             for key in ("recall", "false_positives_per_image", "found", "labelled",
@@ -343,7 +354,7 @@ def run(options) -> "ExperimentResult":
         balls, false_positives = to_spare(ours)
         result.figure(f"{name}/balltrack/balls_to_spare", balls)
         result.figure(f"{name}/balltrack/false_positives_to_spare", false_positives)
-        for key, value in resampled(ours).items():
+        for key, value in resampled_sets[name].items():
             result.figure(f"{name}/balltrack/resampled/{key}", value)
         result.goal(name, f"{name}: recall >= {percent(GOAL_RECALL, 0)} of balls >= {MIN_BALL_PX} px, "
                           f"<= {GOAL_FALSE_POSITIVES:.2f} false positives per image (default settings)",
@@ -354,7 +365,7 @@ def run(options) -> "ExperimentResult":
                        f"false positives per image ({ours['images']} images)")
     result.table(SUMMARY_HEADERS, summary_rows(scores),
                  "Per set, the balltrack detector beside the paper's plain pipeline on the same photos:")
-    result.table(RESAMPLED_HEADERS, resampled_rows(scores),
+    result.table(RESAMPLED_HEADERS, resampled_rows(resampled_sets),
                  f"How much the balltrack figures owe to which photos a set holds: {RESAMPLES} sets "
                  f"of as many images drawn with replacement from each (an image's balls stay "
                  f"together), scored alike. The intervals hold the middle 95 % of their figures; "
@@ -481,7 +492,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {spare:<18} {goal}")
     print(f"\n{'set':<20} {'balltrack: recall, 95 % interval':<34} {'FP per image, 95 % interval':<29} "
           f"resampled sets meeting the goal ({RESAMPLES}, images drawn with replacement)")
-    for name, recall, false_positives, share in resampled_rows(scores):
+    for name, recall, false_positives, share in resampled_rows(resampled_balltrack(scores)):
         print(f"{name:<20} {recall:<34} {false_positives:<29} {share}")
     if args.variants:
         print_variants(folders, config)

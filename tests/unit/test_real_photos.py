@@ -199,8 +199,7 @@ def scored_images(per_image: list[tuple[int, int, int]]) -> dict:
     found = sum(entry[1] for entry in per_image)
     false_positives = sum(entry[2] for entry in per_image)
     return {"files": files, "labelled": labelled, "found": found, "false_positives": false_positives,
-            "images": len(per_image), "recall": found / labelled if labelled else 1.0,
-            "false_positives_per_image": false_positives / len(per_image) if per_image else 0.0}
+            "images": len(per_image), **real_photos.rates(labelled, found, false_positives, len(per_image))}
 
 
 def test_resampled_sets_of_alike_images_have_the_sets_own_figures():
