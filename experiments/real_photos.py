@@ -449,7 +449,8 @@ def main(argv: list[str] | None = None) -> int:
                              "(the colour there, or the checks its candidate failed)")
     parser.add_argument("--variant", choices=list(VARIANTS), metavar="NAME",
                         help="score (and, with --misses, list the misses of) one altered copy of "
-                             "the photos instead of the photos themselves: " + ", ".join(VARIANTS))
+                             "the photos instead of the photos themselves: "
+                             + ", ".join(VARIANTS).replace("%", "%%"))  # (argparse formats help with %)
     args = parser.parse_args(argv)
     try:
         config = load_config(DetectorConfig, args.config, args.set, section="detector")
