@@ -1,7 +1,8 @@
 """The modules a user runs with ``python -m`` (experiments, benchmarks, the demo, the README's
-parameter tables): each refuses a bad argument with one line and status 2, ends quietly with
-status 0 when the reader of its output is gone (``... | head``), as ``balltrack``'s own
-commands do, and a SIGTERM stops it as Ctrl-C does, with the processes it started."""
+parameter tables): each prints its usage for --help, refuses a bad argument with one line and
+status 2, ends quietly with status 0 when the reader of its output is gone (``... | head``), as
+``balltrack``'s own commands do, and a SIGTERM stops it as Ctrl-C does, with the processes it
+started."""
 
 import os
 import re
@@ -49,6 +50,17 @@ def test_a_bad_argument_gets_one_line_and_status_2(module):
     assert len(lines) == 1, finished.stderr
     assert re.fullmatch(r"(python -m \S+|balltrack \w+): .+", lines[0]), lines[0]
     assert finished.stdout == ""
+
+
+@pytest.mark.parametrize("module", module_commands())
+def test_help_prints_the_usage_and_status_0(module):
+    # (argparse formats help texts with %: one stray % in a choice, the variant "specks 2%",
+    # once made real_photos --help a traceback)
+    finished = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True,
+                              env=process_environment(), cwd=REPO, timeout=120)
+    assert finished.returncode == 0, finished.stderr
+    assert finished.stdout.startswith("usage:"), finished.stdout[:200]
+    assert finished.stderr == ""
 
 
 def run_without_reader(arguments: list[str], cwd) -> subprocess.CompletedProcess:
