@@ -43,7 +43,7 @@ from balltrack.common.config import ConfigError, load_config
 from balltrack.common.images import UnreadableImage, read_image
 from balltrack.common.terminal import exit_with
 from balltrack.experiments.detector_speed import PlainDetector
-from balltrack.experiments.photo_variants import VARIANTS, Variant
+from balltrack.experiments.photo_variants import VARIANTS, Variant, exposed
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
 from balltrack.services.detector.explain import explain_place, finds, summary
@@ -270,6 +270,51 @@ def resampled_text(figures: dict) -> tuple[str, str, str]:
             f"{100 * figures['pass_share']:.0f} %")
 
 
+# The exposure gains of ``nudged``: a camera's automatic exposure moves about this much between
+# two shots of one scene.
+NUDGES = (0.97, 0.98, 0.99, 1.01, 1.02, 1.03)
+
+
+def nudged(folder, config: DetectorConfig, gains: tuple[float, ...] = NUDGES) -> dict:
+    """How far a set's balltrack figures hold when its photos are nudged: each scored again
+    with its exposure times each of ``gains`` (``photo_variants.exposed``), a change no one
+    would see. A detector whose decisions keep a margin from its thresholds gives about the
+    same figures on every copy; one that passes on the photos' exact pixels gives figures that
+    move by balls and false positives, and the photos' own figures are then one draw of that
+    spread.
+
+    Returns ``copies`` (per gain: its ``recall`` and ``false_positives_per_image``), the lowest,
+    median and highest of each across the copies (``recall_min``, ``recall_median``,
+    ``recall_max``, ``false_positives_min``, ``false_positives_median``,
+    ``false_positives_max``) and ``pass_share``: the share of the copies that meet the goal."""
+    copies = {gain: score_folder(folder, config=config, variant=exposed(gain)) for gain in gains}
+    figures: dict = {"copies": {gain: {key: scored[key] for key in ("recall", "false_positives_per_image")}
+                                for gain, scored in copies.items()}}
+    for name, key in (("recall", "recall"), ("false_positives", "false_positives_per_image")):
+        values = [scored[key] for scored in copies.values()]
+        figures.update({f"{name}_min": float(min(values)), f"{name}_median": float(np.median(values)),
+                        f"{name}_max": float(max(values))})
+    figures["pass_share"] = sum(meets_goal(scored) for scored in copies.values()) / len(copies)
+    return figures
+
+
+def nudged_text(figures: dict) -> tuple[str, str, str]:
+    """``nudged``'s figures as tables show them: the recall's lowest, median and highest, the
+    same of the false positives per image, and how many copies meet the goal."""
+    copies = len(figures["copies"])
+    return (f"{figures['recall_min']:.3f} / {figures['recall_median']:.3f} / {figures['recall_max']:.3f}",
+            f"{figures['false_positives_min']:.2f} / {figures['false_positives_median']:.2f} / "
+            f"{figures['false_positives_max']:.2f}",
+            f"{round(figures['pass_share'] * copies)} of {copies}")
+
+
+NUDGED_HEADERS = ["set", "balltrack: recall, lowest / median / highest",
+                  "false positives per image, lowest / median / highest",
+                  "nudged copies meeting the goal"]
+NUDGED_CAPTION = (f"How far the balltrack figures hold when each set's photos are nudged: scored again with their "
+                  f"exposure times {', '.join(f'{gain:g}' for gain in NUDGES)} (see nudged):")
+
+
 def spare_text(scored: dict) -> str:
     balls, false_positives = to_spare(scored)
     return f"{balls:+d} balls, {false_positives:+d} FP"
@@ -372,6 +417,13 @@ def run(options) -> "ExperimentResult":
                  f"the last column, about how often a larger set of such photos would pass, were "
                  f"the detector as good on it as on these, which it was tuned on (see resampled):")
     if not options.quick:
+        nudged_sets = {folder.name: nudged(folder, config) for folder in folders}
+        for name, figures in nudged_sets.items():
+            for key, value in figures.items():
+                if key != "copies":
+                    result.figure(f"{name}/balltrack/nudged/{key}", value)
+        result.table(NUDGED_HEADERS, [[name, *nudged_text(figures)] for name, figures in nudged_sets.items()],
+                     NUDGED_CAPTION)
         result.table(["variant"] + list(scores), variant_rows(folders, config),
                      "How the balltrack figures hold up on altered copies of the photos (see "
                      "photo_variants.py; reported only, nothing is tuned on them):")
@@ -444,6 +496,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", action="store_true",
                         help="also score altered copies of the photos (mirrored, smaller, exposure, "
                              "white balance, JPEG, noise, specks: see photo_variants.py), balltrack only")
+    parser.add_argument("--nudged", action="store_true",
+                        help="also score each set with its exposure nudged by 1-3 %% either way (how far its "
+                             "figures hold; see nudged), balltrack only")
     parser.add_argument("--misses", action="store_true",
                         help="also list each counted ball the balltrack detector misses, with why "
                              "(the colour there, or the checks its candidate failed)")
@@ -495,6 +550,8 @@ def main(argv: list[str] | None = None) -> int:
           f"resampled sets meeting the goal ({RESAMPLES}, images drawn with replacement)")
     for name, recall, false_positives, share in resampled_rows(resampled_balltrack(scores)):
         print(f"{name:<20} {recall:<34} {false_positives:<29} {share}")
+    if args.nudged:
+        print_nudged(folders, config)
     if args.variants:
         print_variants(folders, config)
     if args.misses:
@@ -513,6 +570,15 @@ def variant_rows(folders: list[Path], config: DetectorConfig) -> list[list[str]]
             row.append(f"{_figures(scored)} {'PASS' if meets_goal(scored) else 'MISS'}")
         rows.append(row)
     return rows
+
+
+def print_nudged(folders: list[Path], config: DetectorConfig) -> None:
+    print(f"\n{NUDGED_CAPTION}")
+    print(f"{'set':<20} {'recall: lowest / median / highest':<36} {'FP per image: lowest / median / highest':<42} "
+          f"copies meeting the goal")
+    for folder in folders:
+        recall, false_positives, passing = nudged_text(nudged(folder, config))
+        print(f"{folder.name:<20} {recall:<36} {false_positives:<42} {passing}", flush=True)
 
 
 def print_variants(folders: list[Path], config: DetectorConfig) -> None:

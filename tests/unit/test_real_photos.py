@@ -109,6 +109,8 @@ def test_experiment_reports_a_goal_per_set(tmp_path):
     assert "real_photos/two/plain/recall" in result.figures
     assert result.figures["real_photos/one/balltrack/resampled/pass_share"] == 1.0
     assert result.figures["real_photos/two/balltrack/resampled/recall_low"] == 1.0
+    assert result.figures["real_photos/one/balltrack/nudged/pass_share"] == 1.0
+    assert result.figures["real_photos/two/balltrack/nudged/recall_min"] == 1.0
 
 
 def test_variants_move_the_boxes_with_the_image():
@@ -244,3 +246,28 @@ def test_specks_turn_a_share_of_the_pixels_black_or_white():
     assert 0.008 < black < 0.012 and 0.008 < white < 0.012
     assert (speckled == 100).all(axis=2).mean() == pytest.approx(1 - black - white)
     assert np.array_equal(speckled, photo_variants.speckled(0.02)(grey, [])[0])
+
+
+def test_nudged_copies_of_a_plain_set_all_pass(tmp_path, capsys):
+    write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)], [(420.0, 150.0, 40.0)]])
+    figures = real_photos.nudged(tmp_path / "drawn", DetectorConfig())
+    assert list(figures["copies"]) == list(real_photos.NUDGES)
+    assert all(copy == {"recall": 1.0, "false_positives_per_image": 0.0} for copy in figures["copies"].values())
+    assert (figures["recall_min"], figures["recall_max"], figures["false_positives_max"]) == (1.0, 1.0, 0.0)
+    assert figures["pass_share"] == 1.0
+    assert real_photos.nudged_text(figures) == ("1.000 / 1.000 / 1.000", "0.00 / 0.00 / 0.00", "6 of 6")
+    assert real_photos.main([str(tmp_path), "--summary", "--no-plain", "--nudged"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-3].startswith("How far the balltrack figures hold") and lines[-2].startswith("set")
+    assert lines[-1].split() == ["drawn", "1.000", "/", "1.000", "/", "1.000", "0.00", "/", "0.00", "/", "0.00",
+                                 "6", "of", "6"]
+
+
+def test_nudged_figures_spread_over_the_copies(tmp_path):
+    # (times 8 the drawn frame is white, the ball with it: that copy finds nothing)
+    write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)], [(420.0, 150.0, 40.0)]])
+    figures = real_photos.nudged(tmp_path / "drawn", DetectorConfig(), gains=(1.0, 8.0))
+    assert figures["copies"][8.0]["recall"] == 0.0
+    assert (figures["recall_min"], figures["recall_median"], figures["recall_max"]) == (0.0, 0.5, 1.0)
+    assert figures["pass_share"] == 0.5
+    assert real_photos.nudged_text(figures)[2] == "1 of 2"
