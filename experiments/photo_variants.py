@@ -7,6 +7,10 @@ taken from a little further away, exposed differently, white-balanced warmer or 
 compressed harder, noisier or speckled; one fitted to the development photos' particulars
 does not. Each variant is a pure function of an image and its labelled boxes (the boxes moved
 with the image). Nothing here is tuned on: the variants are fixed and only reported.
+
+``NUDGES`` are changes no one would see (exposure by 1-3 %, the frame moved by a pixel or two),
+as two shots of one scene differ: a detector whose decisions keep a margin from its thresholds
+gives about the same figures on each (``real_photos.nudged``).
 """
 
 from typing import Callable
@@ -35,6 +39,15 @@ def scaled(factor: float) -> Variant:
         size = (max(8, round(width * factor)), max(8, round(height * factor)))
         return (cv2.resize(image, size, interpolation=cv2.INTER_AREA),
                 [{key: box[key] * factor for key in ("x", "y", "w", "h")} for box in boxes])
+    return variant
+
+
+def shifted(columns: int, rows: int) -> Variant:
+    """The frame moved: its first ``columns`` columns and ``rows`` rows cut off (the camera
+    turned by as many pixels)."""
+    def variant(image: np.ndarray, boxes: Boxes) -> tuple[np.ndarray, Boxes]:
+        return (np.ascontiguousarray(image[rows:, columns:]),
+                [{**box, "x": box["x"] - columns, "y": box["y"] - rows} for box in boxes])
     return variant
 
 
@@ -95,4 +108,10 @@ VARIANTS: dict[str, Variant] = {
     "jpeg 40": recompressed(40),
     "noise 6": noisy(6.0),
     "specks 2%": speckled(0.02),
+}
+
+NUDGES: dict[str, Variant] = {
+    **{f"exposure x{gain:g}": exposed(gain) for gain in (0.97, 0.98, 0.99, 1.01, 1.02, 1.03)},
+    **{f"moved {columns},{rows} px": shifted(columns, rows)
+       for columns, rows in ((1, 0), (0, 1), (1, 1), (2, 0), (0, 2), (2, 2))},
 }

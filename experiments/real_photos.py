@@ -43,7 +43,7 @@ from balltrack.common.config import ConfigError, load_config
 from balltrack.common.images import UnreadableImage, read_image
 from balltrack.common.terminal import exit_with
 from balltrack.experiments.detector_speed import PlainDetector
-from balltrack.experiments.photo_variants import VARIANTS, Variant, exposed
+from balltrack.experiments.photo_variants import NUDGES, VARIANTS, Variant
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import BallDetector, Detection
 from balltrack.services.detector.explain import explain_place, finds, summary
@@ -270,26 +270,22 @@ def resampled_text(figures: dict) -> tuple[str, str, str]:
             f"{100 * figures['pass_share']:.0f} %")
 
 
-# The exposure gains of ``nudged``: a camera's automatic exposure moves about this much between
-# two shots of one scene.
-NUDGES = (0.97, 0.98, 0.99, 1.01, 1.02, 1.03)
-
-
-def nudged(folder, config: DetectorConfig, gains: tuple[float, ...] = NUDGES) -> dict:
+def nudged(folder, config: DetectorConfig, nudges: dict[str, Variant] | None = None) -> dict:
     """How far a set's balltrack figures hold when its photos are nudged: each scored again
-    with its exposure times each of ``gains`` (``photo_variants.exposed``), a change no one
-    would see. A detector whose decisions keep a margin from its thresholds gives about the
-    same figures on every copy; one that passes on the photos' exact pixels gives figures that
-    move by balls and false positives, and the photos' own figures are then one draw of that
-    spread.
+    under each of ``nudges`` (default ``photo_variants.NUDGES``: exposure times 0.97-1.03, the
+    frame moved by 1-2 px), changes no one would see. A detector whose decisions keep a margin
+    from its thresholds gives about the same figures on every copy; one that passes on the
+    photos' exact pixels gives figures that move by balls and false positives, and the photos'
+    own figures are then one draw of that spread.
 
-    Returns ``copies`` (per gain: its ``recall`` and ``false_positives_per_image``), the lowest,
-    median and highest of each across the copies (``recall_min``, ``recall_median``,
+    Returns ``copies`` (per nudge: its ``recall`` and ``false_positives_per_image``), the
+    lowest, median and highest of each across the copies (``recall_min``, ``recall_median``,
     ``recall_max``, ``false_positives_min``, ``false_positives_median``,
     ``false_positives_max``) and ``pass_share``: the share of the copies that meet the goal."""
-    copies = {gain: score_folder(folder, config=config, variant=exposed(gain)) for gain in gains}
-    figures: dict = {"copies": {gain: {key: scored[key] for key in ("recall", "false_positives_per_image")}
-                                for gain, scored in copies.items()}}
+    nudges = NUDGES if nudges is None else nudges
+    copies = {name: score_folder(folder, config=config, variant=nudge) for name, nudge in nudges.items()}
+    figures: dict = {"copies": {name: {key: scored[key] for key in ("recall", "false_positives_per_image")}
+                                for name, scored in copies.items()}}
     for name, key in (("recall", "recall"), ("false_positives", "false_positives_per_image")):
         values = [scored[key] for scored in copies.values()]
         figures.update({f"{name}_min": float(min(values)), f"{name}_median": float(np.median(values)),
@@ -311,8 +307,8 @@ def nudged_text(figures: dict) -> tuple[str, str, str]:
 NUDGED_HEADERS = ["set", "balltrack: recall, lowest / median / highest",
                   "false positives per image, lowest / median / highest",
                   "nudged copies meeting the goal"]
-NUDGED_CAPTION = (f"How far the balltrack figures hold when each set's photos are nudged: scored again with their "
-                  f"exposure times {', '.join(f'{gain:g}' for gain in NUDGES)} (see nudged):")
+NUDGED_CAPTION = (f"How far the balltrack figures hold when each set's photos are nudged ({len(NUDGES)} copies: "
+                  f"exposure times 0.97-1.03, the frame moved by 1-2 px; see nudged):")
 
 
 def spare_text(scored: dict) -> str:
@@ -497,8 +493,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="also score altered copies of the photos (mirrored, smaller, exposure, "
                              "white balance, JPEG, noise, specks: see photo_variants.py), balltrack only")
     parser.add_argument("--nudged", action="store_true",
-                        help="also score each set with its exposure nudged by 1-3 %% either way (how far its "
-                             "figures hold; see nudged), balltrack only")
+                        help="also score each set's photos nudged (exposure by 1-3 %% either way, moved by 1-2 "
+                             "px: how far its figures hold; see nudged), balltrack only")
     parser.add_argument("--misses", action="store_true",
                         help="also list each counted ball the balltrack detector misses, with why "
                              "(the colour there, or the checks its candidate failed)")

@@ -238,6 +238,14 @@ def test_resampled_figures_are_shares_and_ordered_intervals(per_image):
     assert 0.0 <= figures["pass_share"] <= 1.0
 
 
+def test_a_moved_frame_loses_its_first_columns_and_rows_and_its_boxes_move_with_it():
+    image = np.arange(5 * 6 * 3, dtype=np.uint8).reshape(5, 6, 3)
+    moved, [box] = photo_variants.shifted(2, 1)(image, [{"x": 3.0, "y": 2.0, "w": 2.0, "h": 2.0}])
+    assert moved.shape == (4, 4, 3) and moved.flags.c_contiguous
+    assert np.array_equal(moved[0, 0], image[1, 2])
+    assert box == {"x": 1.0, "y": 1.0, "w": 2.0, "h": 2.0}
+
+
 def test_specks_turn_a_share_of_the_pixels_black_or_white():
     grey = np.full((200, 300, 3), 100, np.uint8)
     speckled, boxes = photo_variants.speckled(0.02)(grey, [{"x": 1.0, "y": 2.0, "w": 3.0, "h": 4.0}])
@@ -251,23 +259,24 @@ def test_specks_turn_a_share_of_the_pixels_black_or_white():
 def test_nudged_copies_of_a_plain_set_all_pass(tmp_path, capsys):
     write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)], [(420.0, 150.0, 40.0)]])
     figures = real_photos.nudged(tmp_path / "drawn", DetectorConfig())
-    assert list(figures["copies"]) == list(real_photos.NUDGES)
+    assert list(figures["copies"]) == list(photo_variants.NUDGES)
     assert all(copy == {"recall": 1.0, "false_positives_per_image": 0.0} for copy in figures["copies"].values())
     assert (figures["recall_min"], figures["recall_max"], figures["false_positives_max"]) == (1.0, 1.0, 0.0)
     assert figures["pass_share"] == 1.0
-    assert real_photos.nudged_text(figures) == ("1.000 / 1.000 / 1.000", "0.00 / 0.00 / 0.00", "6 of 6")
+    assert real_photos.nudged_text(figures) == ("1.000 / 1.000 / 1.000", "0.00 / 0.00 / 0.00", "12 of 12")
     assert real_photos.main([str(tmp_path), "--summary", "--no-plain", "--nudged"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-3].startswith("How far the balltrack figures hold") and lines[-2].startswith("set")
     assert lines[-1].split() == ["drawn", "1.000", "/", "1.000", "/", "1.000", "0.00", "/", "0.00", "/", "0.00",
-                                 "6", "of", "6"]
+                                 "12", "of", "12"]
 
 
 def test_nudged_figures_spread_over_the_copies(tmp_path):
     # (times 8 the drawn frame is white, the ball with it: that copy finds nothing)
     write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)], [(420.0, 150.0, 40.0)]])
-    figures = real_photos.nudged(tmp_path / "drawn", DetectorConfig(), gains=(1.0, 8.0))
-    assert figures["copies"][8.0]["recall"] == 0.0
+    nudges = {"as it is": photo_variants.exposed(1.0), "white": photo_variants.exposed(8.0)}
+    figures = real_photos.nudged(tmp_path / "drawn", DetectorConfig(), nudges)
+    assert figures["copies"]["white"]["recall"] == 0.0
     assert (figures["recall_min"], figures["recall_median"], figures["recall_max"]) == (0.0, 0.5, 1.0)
     assert figures["pass_share"] == 0.5
     assert real_photos.nudged_text(figures)[2] == "1 of 2"
