@@ -15,13 +15,16 @@ READMEs say:
 Each set is scored with the balltrack detector (default settings plus any changes) and with the
 paper's plain pipeline (``detector_speed.PlainDetector``: blur, HSV, CLAHE on V, ``inRange``,
 ``HoughCircles``, no checks) on the same images. Goal of issue 9, per set: recall >= 90 % of
-the counted balls and at most 0.20 false positives per image, with one set of settings.
+the counted balls and at most 0.20 false positives per image, with one set of settings. How
+far a set's figures hold: on other draws of its photos (``resampled``) and on copies of them
+nudged in ways no one would see (``nudged``).
 
 Example::
 
     python -m balltrack.experiments.real_photos /work/shared/data
     python -m balltrack.experiments.real_photos /work/shared/data/real_tennis_dev --set param2=18
     python -m balltrack.experiments.real_photos /work/shared/data --summary --misses
+    python -m balltrack.experiments.real_photos /work/shared/data --summary --nudged
     balltrack experiment real_photos --photos /work/shared/data --out runs/photos
 
 The photos are only read: nothing of them is copied into the output folder but file names and
@@ -307,8 +310,8 @@ def nudged_text(figures: dict) -> tuple[str, str, str]:
 NUDGED_HEADERS = ["set", "balltrack: recall, lowest / median / highest",
                   "false positives per image, lowest / median / highest",
                   "nudged copies meeting the goal"]
-NUDGED_CAPTION = (f"How far the balltrack figures hold when each set's photos are nudged ({len(NUDGES)} copies: "
-                  f"exposure times 0.97-1.03, the frame moved by 1-2 px; see nudged):")
+NUDGED_CAPTION = (f"How far the balltrack figures hold when each set's photos are nudged, {len(NUDGES)} copies "
+                  f"({', '.join(NUDGES)}; see nudged):")
 
 
 def spare_text(scored: dict) -> str:
