@@ -27,7 +27,7 @@ what a coarse colour search that found exactly the ball-coloured blobs and nothi
 give, the most any such search could save (no goal reads it either).
 
 It then splits the balltrack detector's time by stage (``BallDetector.stage_times``): colour
-mask, blobs, acceptance, outline, over every frame and over the middle fifth of the frames,
+mask, blobs, acceptance, outline, washed out, over every frame and over the middle fifth of the frames,
 the ones its p50 reads; and the plain pipeline's, into its colour mask and its Hough transform
 (on the photos the mask is most of it, and the goal leaves the balltrack detector half of it).
 The balltrack detector's blobs stage is split once more by blob size (``blob_split``,
@@ -464,7 +464,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                      f"Where the balltrack detector's time goes, ms per frame (the detector alone, {passes} pass{'es' if passes > 1 else ''} "
                      "over the frames, each frame's median call; middle fifth = the frames "
                      "nearest its median, which the p50 reads). Stages: colour mask = steps 1-4, blobs = 5-6, "
-                     "acceptance = 7, outline = 8-9 (see services/detector/detector.py):")
+                     "acceptance = 7, outline = 8-9, washed out = 10 (see services/detector/detector.py):")
         result.table(["blob size", *(f"{name}: {column}" for name in blob_splits
                                      for column in ("blobs per frame", "ms per frame", "us per blob"))],
                      blob_rows(blob_splits),

@@ -97,6 +97,12 @@ class DetectorConfig:
     hue_margin: float = param(3.0, "the mean colour of a candidate's colour-mask pixels must lie this far "
                                    "inside the hue range (OpenCV H units), unless its shape alone makes it "
                                    "plainly a ball", low=0, high=45)
+    # In direct sun a ball's felt washes out to saturation 20-60 (S 39-52 on the floor set's
+    # sunlit concrete) while grey concrete stays under ~15; such a ball is kept only when its
+    # shape, its hue and its contrast with what is around it make it plainly one (see pale.py).
+    pale_s_min: int = param(20, "lowest saturation of a washed-out ball, kept only when round, alone, brightly "
+                                "lit and far more colourful than its surroundings; 0 (or s_min and above) = off",
+                            low=0, high=255)
     # A court or floor strewn with balls shows a few dozen at once (up to 30 in the floor photos).
     max_detections: int = param(32, "most balls reported per frame (largest first)", low=1)
 

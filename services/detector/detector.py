@@ -30,6 +30,8 @@ module of this package:
    round, too little of the rim in view), and partly hidden balls keep it always.
 9. ``dark.py``: a few rejected candidates with something dark around them get a second look
    for a ball whose unlit side is black.
+10. ``pale.py``: a ball washed out by direct sun (saturation below ``s_min``) is found as a
+   round blob, alone, of the ball's hue and far more colourful than its surroundings.
 
 No zenoh here: arrays in, dataclasses out. ``annotate.py`` draws the detections;
 ``explain.py`` says why a place of a frame holds no ball (``detect_judged``'s candidates).
@@ -66,6 +68,7 @@ from balltrack.services.detector.geometry import Candidate, circle_overlap
 from balltrack.services.detector.mask import (EXPLAINED, ColourMasker, ColourPlanes, check_image,
                                               explained_radius)
 from balltrack.services.detector.outline import DARK_WIDE_REACH, WIDE_REACH, silhouette
+from balltrack.services.detector.pale import pale_balls
 from balltrack.services.detector.proposals import FrameSearch, fill_holes, frame_search, leftover_blobs, leftover_search
 from balltrack.services.detector.regions import Box
 
@@ -75,8 +78,8 @@ MAX_ROUNDS = 3
 # this many times its radius is part of it (a patch between a logo's letters, a piece of rim).
 CONTAINED_RATIO = 3.0
 # The stages ``BallDetector.stage_times`` adds up (seconds), in the order they run: steps 1-4,
-# 5-6, 7 and 8-9 of the pipeline above.
-STAGES = ("colour mask", "blobs", "acceptance", "outline")
+# 5-6, 7, 8-9 and 10 of the pipeline above.
+STAGES = ("colour mask", "blobs", "acceptance", "outline", "washed out")
 
 
 @dataclass(frozen=True)
@@ -206,8 +209,8 @@ class BallDetector:
         started = time.perf_counter()
         contours, shape_mask = fill_holes(planes.mask, planes.extent)
         if not contours:
-            self._lap("blobs", started)
-            return []
+            started = self._lap("blobs", started)
+            return self._with_pale([], planes, started)
         search = frame_search(planes, self.config, scale, shape_mask)
         measured: list[Measured] = []
         for contour in contours:
@@ -217,7 +220,15 @@ class BallDetector:
                 _, _, blob_width, blob_height = cv2.boundingRect(contour)
                 self.blob_times.append((max(blob_width, blob_height), time.perf_counter() - blob_started))
         self._lap("blobs", started)
-        return self._accept(measured, search)
+        return self._with_pale(self._accept(measured, search), planes, time.perf_counter())
+
+    def _with_pale(self, balls: list[Candidate], planes: ColourPlanes, started: float) -> list[Candidate]:
+        """``balls`` and the washed-out balls found besides them (step 10, see pale.py), largest
+        first, at most max_detections."""
+        if len(balls) < self.config.max_detections:
+            balls = sorted(balls + pale_balls(planes, balls, self.config), key=lambda c: c.radius, reverse=True)
+        self._lap("washed out", started)
+        return balls[:self.config.max_detections]
 
     def _accept(self, measured: list[Measured], search: FrameSearch) -> list[Candidate]:
         """Accept candidates best first, then look again around each accepted ball.

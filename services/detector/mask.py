@@ -31,14 +31,17 @@ from balltrack.services.detector.geometry import brightest_channel, gaussian_blu
 from balltrack.services.detector.jit import compiled
 from balltrack.services.detector.regions import (MAX_REGION_ROUNDS, MAX_REGION_SHARE, Box, PartEqualiser,
                                                  coarse_boxes, coarse_hue_table, compute_window,
-                                                 doubled_part, grown_box, half_value, regions_apply,
-                                                 source_span)
+                                                 doubled_part, grown_box, half_value, pale_in_sample,
+                                                 regions_apply, source_span)
 
 # The reference level's bright end is that of 3x3 areas of the frame's quarter sample (12x12
 # pixels of the frame).
 AREA_KERNEL = np.ones((3, 3), np.uint8)
 # The smallest frame side (px) the detector takes: its blur, sampling and CLAHE tiles need room.
 MIN_IMAGE_SIDE = 8
+# A sample of a washed-out ball is at least this share of the frame's reference level bright
+# (below pale.PALE_MIN_BRIGHTNESS, which the mean of its whole blob must reach).
+PALE_SAMPLE_BRIGHTNESS = 0.5
 # Mask value of an accepted ball's disc while its neighbours are judged: neither colour nor not.
 EXPLAINED = 128
 
@@ -67,6 +70,11 @@ class ColourPlanes:
     chroma: np.ndarray      # max - min channel after gain and blur (= S * V / 255), uint8
     reference: float        # the frame's reference level on the ``value`` scale
     dark: bool = False      # an extremely dark frame (gain >= dark_gain: averaged colour)
+    # 255 where the hue is in range but the saturation only pale_s_min..s_min-1 (a washed-out
+    # ball's, see pale.py); None when off, in a dark frame, and where the mask is computed by
+    # regions: a pale blob cut by a region's edge would look alone and round, and the regions'
+    # coarse search looks for saturated colour only
+    pale: np.ndarray | None = None
     # (left, top, right, bottom): the mask is empty outside it (None: anywhere in the frame)
     extent: tuple[int, int, int, int] | None = None
 
@@ -210,19 +218,24 @@ class ColourMasker:
             # search reads the same sample of the gained frame)
             if gain > 1.0:
                 small_hsv = cv2.cvtColor(brighten(small, gain, small), cv2.COLOR_BGR2HSV)
-            found = self._mask_in_regions(gained, gain, small_hsv, boxes)
+            # (a frame that may hold a washed-out ball is done whole: see pale_in_sample)
+            found = None if boxes is None and pale_in_sample(
+                small_hsv, self._coarse_hue, config, PALE_SAMPLE_BRIGHTNESS * min(255.0, reference * gain)
+            ) else self._mask_in_regions(gained, gain, small_hsv, boxes)
             if found is not None:
                 return ColourPlanes(mask=found[0], frame=gained, gain=gain, chroma=found[1],
                                     reference=min(255.0, reference * gain), dark=dark, extent=found[2])
         kernel = config.dark_blur_kernel if dark else config.blur_kernel
         min_chroma = config.dark_min_chroma if dark else config.min_chroma
-        mask, chroma = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
+        mask, chroma, pale = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
         return ColourPlanes(mask=mask, frame=gained, gain=gain, chroma=chroma,
-                            reference=min(255.0, reference * gain), dark=dark)
+                            reference=min(255.0, reference * gain), dark=dark, pale=None if dark else pale)
 
     def _colour_mask(self, gained: np.ndarray, gain: float, kernel: int, min_chroma: float,
-                     opening: bool, equalised: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask and the chroma.
+                     opening: bool, equalised: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask, the chroma and
+        the pale plane (see ColourPlanes; None when ``pale_s_min`` is off).
         ``equalised``: the CLAHE-equalised value plane of the part, None to equalise its own."""
         config = self.config
         hsv = cv2.cvtColor(gaussian_blur(gained, kernel), cv2.COLOR_BGR2HSV)
@@ -233,8 +246,11 @@ class ColourMasker:
         if equalised is None:
             equalised = self.equalise(value, gained)
 
-        mask = hue_mask(hue, config)
-        mask &= cv2.inRange(saturation, config.s_min, config.s_max)
+        in_hue = hue_mask(hue, config)
+        pale = None
+        if 0 < config.pale_s_min < config.s_min:
+            pale = in_hue & cv2.inRange(saturation, config.pale_s_min, config.s_min - 1)
+        mask = in_hue & cv2.inRange(saturation, config.s_min, config.s_max)
         mask &= cv2.inRange(equalised, config.v_min, config.v_max)
         # chroma (max - min channel) = S * V / 255; raw units are these over the gain
         chroma = cv2.multiply(saturation, value, scale=1.0 / 255.0)
@@ -244,7 +260,7 @@ class ColourMasker:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open_kernel)
         if self._close_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close_kernel)
-        return mask, chroma
+        return mask, chroma, pale
 
     def _mask_in_regions(self, gained: np.ndarray, gain: float, sample_hsv: np.ndarray | None = None,
                          boxes: list[Box] | None = None
@@ -279,7 +295,7 @@ class ColourMasker:
                 if equaliser is not None:
                     span = source_span(*window, height // 2, width // 2)
                     part_equalised = doubled_part(equaliser.part(*span), span, *window)
-                part_mask, part_chroma = self._colour_mask(
+                part_mask, part_chroma, _ = self._colour_mask(
                     gained[window], gain, config.blur_kernel, config.min_chroma, opening=True,
                     equalised=part_equalised)
                 inner = (slice(top - window[0].start, bottom - window[0].start),

@@ -43,6 +43,8 @@ MAX_BLOBS = 12
 # Each box costs about as much as steps 2-4 on this many pixels more (the calls' overhead):
 # boxes are merged while their bounding box costs less than they do apart.
 BOX_OVERHEAD_PIXELS = 6000
+# The 2x2 samples a washed-out ball covers (see pale_in_sample).
+PALE_SAMPLE_KERNEL = np.ones((2, 2), np.uint8)
 # Beyond this share of the frame in boxes, doing the whole frame is cheaper.
 MAX_REGION_SHARE = 0.3
 # CLAHE reads the value plane at half size (see ColourMasker.equalise), smoothed by a Gaussian
@@ -103,6 +105,22 @@ def coarse_boxes(frame: np.ndarray, hue_table: np.ndarray, config: DetectorConfi
     if sum(box_area(box) for box in boxes) > MAX_REGION_SHARE * width * height:
         return None
     return boxes
+
+
+def pale_in_sample(sample_hsv: np.ndarray, hue_table: np.ndarray, config: DetectorConfig, bright: float) -> bool:
+    """Whether the HSV of a frame's sample (every COARSE_STEP-th pixel) may hold a washed-out
+    ball (see pale.py): 2x2 neighbouring samples of a hue the coarse search lets through, a
+    saturation from COARSE_SATURATION_SHARE of pale_s_min up to s_min, and a value of at least
+    ``bright``. The pale plane is made on frames done whole only (a pale blob cut by a
+    box's edge would look alone and round), so such a frame is done whole."""
+    if not 0 < config.pale_s_min < config.s_min:
+        return False
+    pale = cv2.LUT(cv2.extractChannel(sample_hsv, 0), hue_table)
+    pale &= cv2.inRange(cv2.extractChannel(sample_hsv, 1), int(config.pale_s_min * COARSE_SATURATION_SHARE),
+                        config.s_min - 1)
+    pale &= cv2.inRange(cv2.extractChannel(sample_hsv, 2), min(255, math.ceil(bright)), 255)
+    # (a ball of the smallest washed-out radius, 8 px, covers 2x2 samples wherever it lies)
+    return cv2.countNonZero(cv2.erode(pale, PALE_SAMPLE_KERNEL)) > 0
 
 
 def blob_boxes(rectangles, step: int, width: int, height: int) -> list[Box]:

@@ -27,10 +27,11 @@ def write_set(folder, balls_per_image):
 
 def write_set_with_a_pale_ball(folder):
     """A set of one image: a ball at (200, 240) and, in the labels, a second one at (420, 240)
-    drawn washed out (its saturation far below s_min), which the detector misses."""
+    drawn pale (its saturation far below s_min) and in shade (too dim for the washed-out pass,
+    services/detector/pale.py), which the detector misses."""
     write_set(folder, [[(200.0, 240.0, 25.0)]])
     image = cv2.imread(str(folder / "0.png"))
-    pale = draw_ball(image.astype(np.float32), 420.0, 240.0, 25.0, colour=(170, 200, 195))
+    pale = draw_ball(image.astype(np.float32), 420.0, 240.0, 25.0, colour=(60, 70, 68))
     cv2.imwrite(str(folder / "0.png"), np.clip(np.rint(pale), 0, 255).astype(np.uint8))
     labels = json.loads((folder / "labels.json").read_text())
     labels["0.png"].append({"x": 395.0, "y": 215.0, "w": 50.0, "h": 50.0})

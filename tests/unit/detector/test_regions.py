@@ -82,7 +82,7 @@ def test_mask_by_regions_is_the_whole_frames():
     image = scene([(8.0, 200.0, 30.0), (320.0, 240.0, 60.0), (500.0, 100.0, 5.0)])
     assert masker._mask_in_regions(image, 1.0) is not None
     planes = masker.planes(image)
-    whole, _ = masker._colour_mask(image, 1.0, 5, DetectorConfig().min_chroma, opening=True)
+    whole, _, _ = masker._colour_mask(image, 1.0, 5, DetectorConfig().min_chroma, opening=True)
     assert np.count_nonzero(whole) > 0
     assert np.count_nonzero(planes.mask != whole) <= 0.002 * np.count_nonzero(whole)
 
