@@ -117,6 +117,11 @@ class DetectorConfig:
     threads: int = param(1, "OpenCV threads of the detector service's process (cv2.setNumThreads); "
                             "0 = OpenCV's default, one per core", low=0, high=64)
 
+    @property
+    def pale_pass(self) -> bool:
+        """Whether washed-out balls are looked for (see pale_s_min)."""
+        return 0 < self.pale_s_min < self.s_min
+
     def __post_init__(self) -> None:
         check_fields(self)
         if self.s_min > self.s_max:

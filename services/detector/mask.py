@@ -227,15 +227,16 @@ class ColourMasker:
                                     reference=min(255.0, reference * gain), dark=dark, extent=found[2])
         kernel = config.dark_blur_kernel if dark else config.blur_kernel
         min_chroma = config.dark_min_chroma if dark else config.min_chroma
-        mask, chroma, pale = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark)
+        mask, chroma, pale = self._colour_mask(gained, gain, kernel, min_chroma, opening=not dark,
+                                               with_pale=not dark)
         return ColourPlanes(mask=mask, frame=gained, gain=gain, chroma=chroma,
-                            reference=min(255.0, reference * gain), dark=dark, pale=None if dark else pale)
+                            reference=min(255.0, reference * gain), dark=dark, pale=pale)
 
     def _colour_mask(self, gained: np.ndarray, gain: float, kernel: int, min_chroma: float,
-                     opening: bool, equalised: np.ndarray | None = None
+                     opening: bool, equalised: np.ndarray | None = None, with_pale: bool = False
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask, the chroma and
-        the pale plane (see ColourPlanes; None when ``pale_s_min`` is off).
+        """Steps 2-4 on ``gained`` (a frame or a part of one): the cleaned mask, the chroma and,
+        ``with_pale``, the pale plane (see ColourPlanes; None without, or when the pass is off).
         ``equalised``: the CLAHE-equalised value plane of the part, None to equalise its own."""
         config = self.config
         hsv = cv2.cvtColor(gaussian_blur(gained, kernel), cv2.COLOR_BGR2HSV)
@@ -248,7 +249,7 @@ class ColourMasker:
 
         in_hue = hue_mask(hue, config)
         pale = None
-        if 0 < config.pale_s_min < config.s_min:
+        if with_pale and config.pale_pass:
             pale = in_hue & cv2.inRange(saturation, config.pale_s_min, config.s_min - 1)
         mask = in_hue & cv2.inRange(saturation, config.s_min, config.s_max)
         mask &= cv2.inRange(equalised, config.v_min, config.v_max)

@@ -7,10 +7,10 @@ candidate check would pass it either. What still tells it from the ground is wha
 ball seen plainly: a round blob, alone, brightly lit, of the ball's hue, far more colourful than
 what lies around it (grey concrete's chroma is a fifth of such a ball's). Those are the only
 evidence here, so each is asked for strictly (PALE_*), and only of blobs large enough for a
-shape to mean something. Frames whose sample may hold such a ball are done whole
-(``regions.pale_in_sample``). The blobs are those of the colour mask joined with the pale plane (hue in
-range, saturation ``pale_s_min`` up to ``s_min``; see ``mask.py``), once the balls already
-found are erased from it.
+shape to mean something. The blobs are those of the colour mask joined with the pale plane
+(hue in range, saturation ``pale_s_min`` up to ``s_min``; see ``mask.py``), once the balls
+already found are erased from it. Frames whose sample may hold such a ball are done whole
+(``regions.pale_in_sample``).
 """
 
 import math
@@ -71,12 +71,15 @@ def pale_balls(planes: ColourPlanes, balls: list[Candidate], config: DetectorCon
     found = []
     for contour in contours:
         _, _, width, height = cv2.boundingRect(contour)
-        if max(width, height) < 2 * PALE_MIN_RADIUS or cv2.contourArea(contour) < 0.5 * smallest_area:
-            continue  # (the cheap tests first: most blobs are specks)
+        if max(width, height) < 2 * PALE_MIN_RADIUS:
+            continue  # (the cheap test first: most blobs are specks)
+        area = cv2.contourArea(contour)
+        if area < 0.5 * smallest_area:
+            continue
         (x, y), radius = cv2.minEnclosingCircle(contour)
         # (a polygon through the outline's pixel centres holds about half its outline's length
         # less than the blob's pixel count: this far below PALE_MIN_FILL it is no disc)
-        if radius >= PALE_MIN_RADIUS and cv2.contourArea(contour) >= (PALE_MIN_FILL - 0.15) * math.pi * radius ** 2:
+        if radius >= PALE_MIN_RADIUS and area >= (PALE_MIN_FILL - 0.15) * math.pi * radius ** 2:
             ball = judged(planes, blobs, contour, x, y, radius, config)
             if ball is not None:
                 found.append(ball)

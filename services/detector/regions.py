@@ -113,7 +113,7 @@ def pale_in_sample(sample_hsv: np.ndarray, hue_table: np.ndarray, config: Detect
     saturation from COARSE_SATURATION_SHARE of pale_s_min up to s_min, and a value of at least
     ``bright``. The pale plane is made on frames done whole only (a pale blob cut by a
     box's edge would look alone and round), so such a frame is done whole."""
-    if not 0 < config.pale_s_min < config.s_min:
+    if not config.pale_pass:
         return False
     pale = cv2.LUT(cv2.extractChannel(sample_hsv, 0), hue_table)
     pale &= cv2.inRange(cv2.extractChannel(sample_hsv, 1), int(config.pale_s_min * COARSE_SATURATION_SHARE),
