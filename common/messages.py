@@ -3,7 +3,9 @@
 Every message is one msgpack map. ``decode(name, payload)`` returns a plain dict or raises
 :class:`MessageError` with a one-line reason; ``encode(name, message)`` validates before
 packing so a service never publishes what its peers would reject. Extra fields are kept
-(the contract allows fields to be added). Nothing here ever unpickles or evaluates data.
+(the contract allows fields to be added), except in a ConfigRequest, whose unknown field is
+refused: there it is a typo or an ask this service cannot do, and read as a plain read it would
+be answered ok while nothing changed. Nothing here ever unpickles or evaluates data.
 """
 
 import io
@@ -21,6 +23,9 @@ MAX_FRAME_ID = 64
 HEADER_FIELDS = ("stamp", "frame_id", "seq")
 # Nesting levels a message may have (the contract's deepest, GroundTruth, has 4).
 MAX_DEPTH = 32
+# A refused unknown field is named, but of a map with thousands only this many: the error goes
+# into a reply and a log line.
+UNKNOWN_FIELDS_NAMED = 3
 ENCODINGS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
 SIM_OPS = ("reset", "set_light", "place_ball", "place_robot")
 DISTORTION_MODELS = ("plumb_bob", "", "none")
@@ -146,13 +151,18 @@ def vector(length: int, item: Check | None = None) -> Check:
     return check
 
 
-def record(fields: dict[str, Check], optional: dict[str, Check] | None = None) -> Check:
-    """A map with required ``fields`` and ``optional`` ones; unknown keys pass through."""
+def record(fields: dict[str, Check], optional: dict[str, Check] | None = None,
+           closed: bool = False) -> Check:
+    """A map with required ``fields`` and ``optional`` ones; unknown keys pass through, or with
+    ``closed`` are refused (the error names the first UNKNOWN_FIELDS_NAMED of them)."""
     optional = optional or {}
+    known = {**fields, **optional}
 
     def check(value, path):
         if not isinstance(value, dict):
             _fail(path, f"expected a map, got {type(value).__name__}")
+        if closed:
+            _refuse_unknown(value, known, path)
         result = dict(value)
         for name, field_check in fields.items():
             if name not in value:
@@ -163,6 +173,18 @@ def record(fields: dict[str, Check], optional: dict[str, Check] | None = None) -
                 result[name] = field_check(value[name], f"{path}.{name}" if path else name)
         return result
     return check
+
+
+def _refuse_unknown(value: dict, known: dict, path: str) -> None:
+    unknown = [key for key in value if key not in known]
+    if not unknown:
+        return
+    # (repr: a key may be any msgpack value, and quotes show a stray space in a name)
+    named = ", ".join(shorten(repr(key), 40) for key in unknown[:UNKNOWN_FIELDS_NAMED])
+    more = f" and {len(unknown) - UNKNOWN_FIELDS_NAMED} more" if len(unknown) > UNKNOWN_FIELDS_NAMED else ""
+    plural = "s" if len(unknown) > 1 else ""
+    reason = f"unknown field{plural} {named}{more} (expected only {', '.join(known) or 'nothing'})"
+    raise MessageError(f"{shorten(path, 200)}: {reason}" if path else reason)
 
 
 def listing(item: Check, max_items: int = MAX_LIST) -> Check:
@@ -293,9 +315,10 @@ SCHEMAS: dict[str, Check] = {
         "lockstep_timeouts": integer(0), "command_time": number(),
     }),
     # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes,
-    # {"describe": true} adds every parameter's declaration to the reply.
+    # {"describe": true} adds every parameter's declaration to the reply. Closed: {"sett": ...}
+    # is refused rather than answered as a read that changed nothing.
     "ConfigRequest": record({}, {"set": lambda value, path: record({})(value, path),
-                                 "describe": boolean}),
+                                 "describe": boolean}, closed=True),
     "ConfigReply": record({"ok": boolean}, {"config": record({}), "error": text(max_length=4096),
                                             "parameters": _parameters}),
 }

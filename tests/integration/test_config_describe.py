@@ -1,5 +1,6 @@
 """The parameters' declarations over a real router: ``{"describe": true}`` on ``<service>/config``,
-``balltrack config SERVICE --describe``, and a choice (the locator's ``mode``) changed live."""
+``balltrack config SERVICE --describe``, a choice (the locator's ``mode``) changed live, and a
+request with an unknown field refused."""
 
 import json
 import math
@@ -46,6 +47,15 @@ def test_describe_over_the_router_and_from_the_command(router, session, locator)
                              timeout=60, cwd=REPO, env=process_environment())
     assert command.returncode == 0, command.stderr
     assert json.loads(command.stdout) == describe_config(LocatorConfig)
+
+
+def test_a_request_with_an_unknown_field_is_refused_and_changes_nothing(session, locator):
+    before = query_config(session, "locator")["config"]
+    typo = ask(session, "locator", {"sett": {"ball_radius": 0.05}})
+    assert not typo["ok"] and "'sett'" in typo["error"], typo
+    many = ask(session, "locator", {f"key{index}": index for index in range(100_000)})
+    assert not many["ok"] and len(many["error"]) < 400, many
+    assert query_config(session, "locator")["config"] == before
 
 
 def test_a_choice_changed_live_is_a_plain_string_and_takes_effect(session, locator):

@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import re
 import time
 import types
 
@@ -41,6 +42,22 @@ def test_round_trip_keeps_fields_and_extras():
 def test_garbage_is_a_message_error(payload, reason):
     with pytest.raises(MessageError, match=reason):
         decode("Ball2D", payload)
+
+
+@pytest.mark.parametrize("request_map, named", [
+    ({"sett": {"param2": 18}}, "unknown field 'sett' "),
+    ({"set": {"param2": 18}, "describ": True}, "unknown field 'describ' "),
+    # (within the unpacker's 4,096 keys a map may have)
+    ({f"typo{index}": index for index in range(4000)}, "unknown fields 'typo0', 'typo1', 'typo2' and 3997 more"),
+])
+def test_a_config_request_with_an_unknown_field_is_refused_naming_it(request_map, named):
+    # An unknown field is a typo (or a request this service cannot do): read as a plain read,
+    # it would answer ok while changing nothing.
+    with pytest.raises(MessageError, match=re.escape(named)) as refused:
+        decode("ConfigRequest", msgpack.packb(request_map))
+    assert len(str(refused.value)) < 200
+    assert decode("ConfigRequest", msgpack.packb({"set": {"param2": 18}, "describe": True})) == {
+        "set": {"param2": 18}, "describe": True}
 
 
 @pytest.mark.parametrize("field, value, reason", [
