@@ -391,6 +391,9 @@ def unpack_sharing_bins(payload: bytes, minimum: int = SHARED_BIN_MIN) -> Any:
     base = 0  # where in payload the current unpacker started reading
     try:
         count = unpacker.read_map_header()
+        if count > UNPACK_OPTIONS["max_map_len"]:
+            # (read_map_header does not apply the limit; msgpack.unpackb below raises its error)
+            raise ValueError("map too long")
         message = {}
         for _ in range(count):
             key = unpacker.unpack()

@@ -337,6 +337,16 @@ def test_sharing_bins_fails_as_msgpack_does(value, data):
     assert unpacked(payload, 1) == unpacked_by_msgpack(payload)
 
 
+def test_sharing_bins_keeps_msgpacks_limit_on_a_maps_keys():
+    payload = pack({f"key{index}": index for index in range(UNPACK_OPTIONS["max_map_len"] + 1)})
+    assert unpacked(payload, 1) == unpacked_by_msgpack(payload) == ValueError
+    # Past SHARED_BIN_MIN bytes a payload is unpacked the sharing way: refused all the same.
+    payload = pack({f"key{index}": index for index in range(100_000)})
+    assert len(payload) > SHARED_BIN_MIN
+    with pytest.raises(MessageError, match="exceeds max_map_len"):
+        decode("Clock", payload)
+
+
 def test_a_frame_is_decoded_without_copying_its_pixels():
     pixels = np.random.default_rng(3).integers(0, 256, (480, 640, 3), np.uint8)
     payload = encode("Image", bgr_to_message(pixels, 5, 7))
