@@ -37,6 +37,22 @@ from tqdm import tqdm  # noqa: E402
 RESULTS_FILE = "results.json"
 REPORT_FILE = "report.md"
 MODES = ("in-process", "zenoh", "offline", "skipped")
+# The development photos are not in the repository: without --photos they are looked for in the
+# folder this environment variable names, else in shared/data beside the repository (in a
+# source checkout, where this file is <repository>/experiments/base.py).
+PHOTOS_VARIABLE = "BALLTRACK_PHOTOS"
+REPOSITORY = Path(__file__).resolve().parents[1]
+SHARED_PHOTOS = REPOSITORY.parent / "shared" / "data"
+PHOTOS_DEFAULT_TEXT = f"${PHOTOS_VARIABLE}, else ../shared/data beside the repository"
+
+
+def development_photos(option: str | Path | None = None) -> Path:
+    """The folder of the development photos: ``option`` (a ``--photos`` given), else
+    $BALLTRACK_PHOTOS, else SHARED_PHOTOS. It may not exist."""
+    if option:
+        return Path(option)
+    configured = os.environ.get(PHOTOS_VARIABLE)
+    return Path(configured) if configured else SHARED_PHOTOS
 
 
 @dataclass

@@ -14,7 +14,7 @@ Examples::
 
     balltrack experiment all --quick --out runs/quick
     balltrack experiment illumination --frames 3 --out /tmp/illumination
-    balltrack experiment real_photos --photos /work/shared/data --out runs/photos
+    balltrack experiment real_photos --photos ../shared/data --out runs/photos
     balltrack experiment tracking --transport in-process --out runs/tracking
 """
 
@@ -25,8 +25,8 @@ from pathlib import Path
 
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import exit_with
-from balltrack.experiments.base import ExperimentResult, Options, Stopwatch, write_outputs
-from balltrack.experiments.detector_speed import DEFAULT_PHOTOS
+from balltrack.experiments.base import (PHOTOS_DEFAULT_TEXT, PHOTOS_VARIABLE, SHARED_PHOTOS, ExperimentResult,
+                                        Options, Stopwatch, development_photos, write_outputs)
 from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
@@ -48,8 +48,8 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--photos", default=None, metavar="DIR",
                         help="labelled photos for real_photos: a set (images + labels.json) or a "
-                             "folder of sets (every subfolder with labels.json); `all` uses "
-                             "/work/shared/data when it exists")
+                             "folder of sets (every subfolder with labels.json); without it `all` "
+                             f"(and detector_speed) use {PHOTOS_DEFAULT_TEXT}, when it holds sets")
     parser.add_argument("--transport", choices=TRANSPORTS, default="auto",
                         help="tracking: Zenoh services in lockstep (zenoh), the in-process loop, "
                              "or zenoh when the simulator service works (auto, default)")
@@ -83,8 +83,13 @@ def parse(argv: list[str]) -> Options:
             parser.error(f"--photos: {photos} has no labels.json, nor any subfolder with one")
     elif args.name == "real_photos":
         parser.error("real_photos needs --photos DIR (a labelled set, or a folder of them)")
-    elif args.name == "all" and photo_sets(DEFAULT_PHOTOS):
-        photos = DEFAULT_PHOTOS
+    elif args.name == "all":
+        photos = development_photos()
+        if not photo_sets(photos):
+            # The folder beside the repository may well be absent; one the variable names is a mistake.
+            if photos != SHARED_PHOTOS:
+                parser.error(f"${PHOTOS_VARIABLE}: {photos} has no labels.json, nor any subfolder with one")
+            photos = None
     options = Options(out=out, quick=args.quick, frames=args.frames, seed=args.seed,
                       photos=photos, transport=args.transport, progress=not args.no_progress,
                       detector_overrides=args.detector, follower_overrides=args.follower)

@@ -15,7 +15,7 @@ which the recording names.
 Example::
 
     python -m balltrack.experiments.detector_outputs record before.json \\
-        --photos /work/shared/data --recording runs/demo-X/run.mcap --every 2 --renders 60
+        --photos ../shared/data --recording runs/demo-X/run.mcap --every 2 --renders 60
     # ... change the detector ...
     python -m balltrack.experiments.detector_outputs compare before.json
 """

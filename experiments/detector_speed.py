@@ -3,7 +3,8 @@
 Both run on the same frames in one run, calls alternating (plain, balltrack, plain, ...) so
 that whatever else loads the machine loads both alike: simulator renders (chase, multi,
 distractors scenarios) and real photos made the 640x480 frames a 4:3 camera would give
-(``camera_frame``; every folder of ``--photos``, by default /work/shared/data when it exists).
+(``camera_frame``; every folder of ``--photos``, by default $BALLTRACK_PHOTOS, else ../shared/data
+beside the repository, when it exists).
 Wall and CPU time per call, median and 90th percentile, the cores called directly (no
 transport). OpenCV runs single-threaded (``cv2.setNumThreads(1)``, ``--threads`` to change
 it): the goal of issue 9 is a balltrack detector twice as fast as the plain pipeline on one
@@ -35,7 +36,7 @@ The balltrack detector's blobs stage is split once more by blob size (``blob_spl
 
 Example::
 
-    balltrack experiment detector_speed --photos /work/shared/data
+    balltrack experiment detector_speed --photos ../shared/data
 """
 
 import dataclasses
@@ -55,7 +56,6 @@ from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.detector import STAGES, BallDetector, compile_kernels
 from balltrack.services.detector.regions import Box, blob_boxes
 
-DEFAULT_PHOTOS = Path("/work/shared/data")
 GOAL_RATIO = 2.0
 # (width, height) of the frames timed: the issue's, and the simulator camera's.
 FRAME_SIZE = (640, 480)
@@ -489,18 +489,22 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
 
 def run(options) -> "ExperimentResult":
     """The ``balltrack experiment detector_speed`` entry point: simulator renders, and the
-    photos of ``--photos`` (or of /work/shared/data under ``all``) when there are any."""
-    photos = options.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
-    return speed_result(options.detector_config(), options.budget(30, 60), photos,
+    photos of ``--photos`` (or the development photos, ``development_photos``) when there are any."""
+    from balltrack.experiments.base import development_photos
+
+    photos = options.photos or development_photos()
+    return speed_result(options.detector_config(), options.budget(30, 60), photos if photos.is_dir() else None,
                         repeats=60 if options.quick else 300, passes=1 if options.quick else 3,
                         quick=options.quick)
 
 
 def main(argv: list[str] | None = None) -> int:
+    from balltrack.experiments.base import PHOTOS_DEFAULT_TEXT, SHARED_PHOTOS, development_photos
+
     parser = ArgumentParser(prog="python -m balltrack.experiments.detector_speed",
                             description=__doc__.splitlines()[0])
     parser.add_argument("--photos", type=Path, default=None,
-                        help=f"folder of .jpg/.png photos, searched recursively (default {DEFAULT_PHOTOS} "
+                        help=f"folder of .jpg/.png photos, searched recursively (default {PHOTOS_DEFAULT_TEXT}, "
                              "when it exists)")
     parser.add_argument("--no-photos", action="store_true", help="simulator renders only")
     parser.add_argument("--frames", type=int, default=60, help="simulator renders (default 60)")
@@ -512,10 +516,14 @@ def main(argv: list[str] | None = None) -> int:
         print("detector_speed: --repeats must be at least 10, --frames at least 3 and --threads "
               "at least 1", file=sys.stderr)
         return 2
-    photos = None if args.no_photos else args.photos or (DEFAULT_PHOTOS if DEFAULT_PHOTOS.is_dir() else None)
+    photos = None if args.no_photos else development_photos(args.photos)
     if photos is not None and not photos.is_dir():
-        print(f"detector_speed: {photos}: not a folder", file=sys.stderr)
-        return 2
+        # The folder beside the repository may well be absent; one given or named by the variable is a mistake.
+        if photos == SHARED_PHOTOS and args.photos is None:
+            photos = None
+        else:
+            print(f"detector_speed: {photos}: not a folder", file=sys.stderr)
+            return 2
     if photos is not None and not photo_paths(photos):
         print(f"detector_speed: no .jpg/.png photos under {photos}", file=sys.stderr)
         photos = None

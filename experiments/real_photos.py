@@ -2,7 +2,7 @@
 
 A set is a folder of images with a ``labels.json`` mapping each file name to a list of boxes
 ``{x, y, w, h}`` (pixels, top-left corner), one per ball; a folder without one stands for every
-subfolder that has one (e.g. /work/shared/data: every development set). Scoring, as the sets'
+subfolder that has one (e.g. ../shared/data: every development set). Scoring, as the sets'
 READMEs say:
 
 - a ball counts when its box is at least ``min_ball_px`` (20) pixels wide; as a ball cut by
@@ -21,11 +21,11 @@ nudged in ways no one would see (``nudged``).
 
 Example::
 
-    python -m balltrack.experiments.real_photos /work/shared/data
-    python -m balltrack.experiments.real_photos /work/shared/data/real_tennis_dev --set param2=18
-    python -m balltrack.experiments.real_photos /work/shared/data --summary --misses
-    python -m balltrack.experiments.real_photos /work/shared/data --summary --nudged
-    balltrack experiment real_photos --photos /work/shared/data --out runs/photos
+    python -m balltrack.experiments.real_photos ../shared/data
+    python -m balltrack.experiments.real_photos ../shared/data/real_tennis_dev --set param2=18
+    python -m balltrack.experiments.real_photos ../shared/data --summary --misses
+    python -m balltrack.experiments.real_photos ../shared/data --summary --nudged
+    balltrack experiment real_photos --photos ../shared/data --out runs/photos
 
 The photos are only read: nothing of them is copied into the output folder but file names and
 numbers.

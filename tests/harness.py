@@ -22,7 +22,6 @@ from balltrack.common.session import open_session
 from balltrack.common.waiting import POLL_INTERVAL, poll_until
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
 
 
 def process_environment() -> dict:

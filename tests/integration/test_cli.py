@@ -14,7 +14,8 @@ import pytest
 
 from balltrack.common.images import bgr_to_message
 from balltrack.common.messages import encode
-from tests.harness import (REPO, SHARED, Collector, Liveliness, Process, client, draw_ball, floor_image, free_port,
+from balltrack.experiments.base import development_photos
+from tests.harness import (REPO, Collector, Liveliness, Process, client, draw_ball, floor_image, free_port,
                            process_environment, start_service)
 from tests.integration.test_pipeline import CAMERA_INFO
 
@@ -56,7 +57,7 @@ def test_detect_explains_a_found_ball_and_a_pale_one(tmp_path):
 
 
 def test_detect_on_real_photos_finds_balls():
-    photo = SHARED / "data/real_tennis_dev/1747468182.jpg"
+    photo = development_photos() / "real_tennis_dev/1747468182.jpg"
     if not photo.exists():
         pytest.skip(f"{photo} not present")
     result = balltrack("detect", str(photo))

@@ -14,7 +14,6 @@ import json
 import math
 import pkgutil
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -23,6 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from balltrack.common.config import ConfigError, load_config
+from balltrack.experiments.base import development_photos
 from balltrack.experiments.real_photos import score_folder, score_image
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.checks import CandidateMetrics
@@ -38,7 +38,7 @@ from tests import harness
 from tests.unit.detector.drawing import (TENNIS_BGR, coverage, draw_ball, draw_box, draw_lit_from_above,
                                          floor, pitch_dark_frame, scene, to_uint8)
 
-SHARED_DATA = Path(__file__).resolve().parents[4] / "shared/data"
+SHARED_DATA = development_photos()
 REAL_DEV_SET = SHARED_DATA / "real_tennis_dev"
 
 
