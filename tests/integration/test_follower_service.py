@@ -162,3 +162,40 @@ def test_switching_keep_target_live_follows_the_other_key(session, start_followe
     assert query_config(session, "follower", {"keep_target": False})["ok"]
     put_until(lambda _: session.put("detected_ball", encode("Ball2D", detection(0.4, 0.05, 2000))),
               commands, answered(2000), 10, 0.5, "a command for detected_ball after switching back")
+
+
+def test_commands_stay_on_the_frame_clock_while_chasing_and_searching(session, start_follower):
+    # `deploy start`'s defaults: the follower's timer on the wall clock, the frames on a
+    # simulator's (seconds from its start). Every command must carry the frames' clock.
+    start_follower("keep_target=true", "rcv_timeout_secs=0.5")
+    commands = Collector(session, "cmd_vel", "Twist")
+    commands.wait_for(lambda m: m and m[-1]["mode"] == "search", 5, "search before any frame")
+    sent = {0: 0}  # stamp -> seq of every frame put; 0 is the stamp before any frame
+    frames = iter(range(1, 10_000))
+
+    def put_frame(*balls):
+        seq = next(frames)
+        stamp = 3_000_000_000 + seq * 33_333_333
+        sent[stamp] = seq
+        session.put("detected_balls", encode("Ball2DArray", {"header": header(stamp, seq), "balls": [
+            {key: value for key, value in detection(x, z, seq).items() if key != "header"}
+            for x, z in balls]}))
+
+    put_until(lambda _: put_frame((0.4, 0.05)), commands,
+              lambda m: [c for c in m if c["mode"] == "chase"], 10, 0.2, "a chase command")
+    last_chase_frame = max(sent)
+    # Frames without the ball: after rcv_timeout_secs the follower searches.
+    put_until(lambda _: put_frame(), commands, lambda m: [
+        c for c in m if c["mode"] == "search" and c["header"]["stamp"] > last_chase_frame],
+        10, 0.2, "a search command after frames without the ball")
+    # No frames at all: the search goes on with the last frame's stamp.
+    seen = len(commands.messages)
+    commands.wait_for(lambda m: len(m) >= seen + 3, 5, "search commands after the frames stopped")
+
+    for command in list(commands.messages):
+        assert command["header"]["stamp"] in sent, command
+        assert sent[command["header"]["stamp"]] == command["header"]["seq"], command
+        assert command["time"] in sent, command
+    assert {command["mode"] for command in commands.messages} == {"chase", "search"}
+    last_frame = max(sent)
+    assert commands.messages[-1]["header"]["stamp"] == commands.messages[-1]["time"] == last_frame

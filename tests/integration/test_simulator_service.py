@@ -205,20 +205,23 @@ def test_sim_control_rejects_bad_requests_and_serves_good_ones(session, start_si
     assert brightness(image) == baseline_light
 
 
-def lockstep_run(router, session, log_dir, frames: int, pacing: str = "lockstep"):
-    """Detector, follower (simulated time) and a simulator paced by ``pacing``: the first
-    ``frames`` ground truths, the commands and the simulator's log; all stopped (exit 0).
-    (With pacing=realtime or fast, two runs already differ within the first frames.)"""
+def lockstep_run(router, session, log_dir, frames: int, pacing: str = "lockstep",
+                 follower: tuple[str, ...] = ("use_sim_time=true",), lockstep_timeout: float = 10):
+    """Detector, follower (simulated time, or the ``follower`` settings) and a simulator paced by
+    ``pacing``: the first ``frames`` ground truths, the commands and the simulator's log; all
+    stopped (exit 0). (With pacing=realtime or fast, two runs already differ within the first
+    frames.)"""
     liveliness = Liveliness(session)
     pipeline = [start_service("detector", router.endpoint, log_dir),
-                start_service("follower", router.endpoint, log_dir, "--set", "use_sim_time=true")]
+                start_service("follower", router.endpoint, log_dir,
+                              *[item for setting in follower for item in ("--set", setting)])]
     for name in ("detector", "follower"):
         liveliness.wait(name, timeout=30)
     truths = Collector(session, "sim/ground_truth", "GroundTruth")
     commands = Collector(session, "cmd_vel", "Twist")
     simulator = start_service("simulator", router.endpoint, log_dir, "--set", f"pacing={pacing}",
                               "--set", "width=320", "--set", "height=240", "--set", "seed=7",
-                              "--set", "image_noise=2", "--set", "lockstep_timeout=10")
+                              "--set", "image_noise=2", "--set", f"lockstep_timeout={lockstep_timeout}")
     try:
         truths.wait_count(frames, 180)  # generous: a loaded 2-core machine renders slowly
     finally:
@@ -248,6 +251,24 @@ def test_lockstep_runs_with_the_same_seed_are_identical(router, session, log_dir
     assert any(command["mode"] == "chase" for command in commands), "the detector saw no ball"
     assert abs(first[-1]["robot"]["yaw"]) > 0.05, "the commands did not turn the robot"
     assert first == second
+
+
+def test_lockstep_with_a_follower_on_the_wall_clock_gets_every_tick(router, session, log_dir):
+    # `deploy start`'s follower runs on the wall clock. Its commands carry the frames' clock in
+    # ``time``, so the tick a lockstep frame waits for (``time`` equal to the frame's stamp)
+    # comes with the follower's next wall tick after it saw that frame's detections.
+    frames = 30
+    truths, commands, log = lockstep_run(router, session, log_dir, frames, follower=(),
+                                         lockstep_timeout=2)
+    assert " 0 lockstep timeouts" in log, log
+    stamps = {0} | {truth["header"]["stamp"] for truth in truths}
+    # (commands of frames past the first ``frames`` are on the same clock but not in ``truths``)
+    last = truths[-1]["header"]["stamp"]
+    for command in commands:
+        if command["header"]["stamp"] <= last:
+            assert command["header"]["stamp"] in stamps and command["time"] in stamps, command
+    assert all(command["time"] < 10**15 for command in commands), "a command on the wall clock"
+    assert any(command["mode"] == "chase" for command in commands), "the detector saw no ball"
 
 
 def test_bad_config_exits_2_recording_and_sigterm_exits_0(router, session, log_dir, start_simulator):
