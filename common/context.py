@@ -61,6 +61,12 @@ class RateLimitedLog:
         self.logger.warning("%s on %s: %s%s", what, key, shorten(reason, 300), suffix)
 
 
+# Stats describe the process (counts, processing times in wall milliseconds, a 1 Hz heartbeat
+# that goes on while a simulation is paused), not frames: their ``stamp`` is the wall clock's,
+# and every snapshot says so in ``stamp_clock``, for a reader that puts all keys on one timeline.
+STATS_CLOCK = "wall"
+
+
 class Stats:
     """Counters and processing-time percentiles for ``<service>/stats``."""
 
@@ -81,9 +87,10 @@ class Stats:
             self._durations.append(seconds * 1000.0)
 
     def snapshot(self, stamp_ns: int) -> dict:
+        """The Stats message at wall-clock time ``stamp_ns`` (see STATS_CLOCK)."""
         with self._lock:
             durations = np.array(self._durations) if self._durations else np.zeros(1)
-            figures = {"service": self.service, "stamp": int(stamp_ns),
+            figures = {"service": self.service, "stamp": int(stamp_ns), "stamp_clock": STATS_CLOCK,
                        "received": self.received, "published": self.published,
                        "rejected": self.rejected, "dropped": self.dropped,
                        "p50_ms": float(np.percentile(durations, 50)),

@@ -6,6 +6,10 @@ packing so a service never publishes what its peers would reject. Extra fields a
 (the contract allows fields to be added), except in a ConfigRequest, whose unknown field is
 refused: there it is a typo or an ask this service cannot do, and read as a plain read it would
 be answered ok while nothing changed. Nothing here ever unpickles or evaluates data.
+
+Which clock every time field carries, and what a simulator's restart does to it: the README's
+*Clocks* under "The contract". In short, data messages are on the frames' clock, Stats' ``stamp``
+on the wall clock.
 """
 
 import io
@@ -302,17 +306,20 @@ SCHEMAS: dict[str, Check] = {
     }),
     "SimCommand": record({"op": text(SIM_OPS)}),
     "SimReply": record({"ok": boolean}, {"error": text(max_length=4096)}),
+    # Diagnostics of a process, not data: ``stamp`` is wall-clock time, which ``stamp_clock``
+    # ("wall") names; the simulator's ``command_stamp`` and ``command_time`` are simulated time.
     "Stats": record({
         "service": text(), "stamp": integer(0),
         "received": integer(0), "published": integer(0),
         "rejected": integer(0), "dropped": integer(0),
         "p50_ms": number(0.0), "p99_ms": number(0.0),
     }, {
+        "stamp_clock": text(max_length=32),
         # Added by the simulator: simulated seconds per wall second over the last ~5 s, frames
         # so far, mean render time, frames or ticks that lockstep gave up waiting for, and the
         # simulated time at which it took the last cmd_vel (the safety stop counts from there).
         "real_time_factor": number(0.0), "frames": integer(0), "render_ms": number(0.0),
-        "lockstep_timeouts": integer(0), "command_time": number(),
+        "lockstep_timeouts": integer(0), "command_time": number(), "command_stamp": integer(0),
     }),
     # The <service>/config queryable: an empty request (or {}) reads, {"set": {...}} changes,
     # {"describe": true} adds every parameter's declaration to the reply. Closed: {"sett": ...}

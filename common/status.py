@@ -13,7 +13,8 @@ EMPTY_RETRIES = 3
 
 
 # The figures every service's Stats has; ``other_figures`` shows what a service adds to them.
-COMMON_FIELDS = ("service", "stamp", "received", "published", "rejected", "dropped", "p50_ms", "p99_ms")
+COMMON_FIELDS = ("service", "stamp", "stamp_clock", "received", "published", "rejected", "dropped",
+                 "p50_ms", "p99_ms")
 
 
 def other_figures(stats: dict) -> str:

@@ -260,6 +260,15 @@ def test_a_handlers_time_leaves_out_the_handlers_its_puts_call(monkeypatch):
     assert sorted(detector.stats._durations) == [3000.0, 4000.0]
 
 
+def test_stats_name_the_clock_of_their_stamp():
+    from balltrack.common.context import Stats
+
+    snapshot = decode("Stats", encode("Stats", Stats("follower").snapshot(1_796_637_533_000_000_000)))
+    assert snapshot["stamp_clock"] == "wall"
+    # A status line shows a service's own figures only, not the clock every one names.
+    assert other_figures(snapshot) == ""
+
+
 def test_other_figures_are_a_service_s_own_in_its_order():
     stats = {"service": "simulator", "stamp": 1, "received": 2, "published": 3, "rejected": 0,
              "dropped": 0, "p50_ms": 1.0, "p99_ms": 2.0, "real_time_factor": 0.998765, "frames": 40}
