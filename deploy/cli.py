@@ -113,7 +113,8 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
                       listen=listen, router_connect=args.router_connect,
                       router_config=args.router_config, connect=args.connect,
                       zenoh_config=args.zenoh_config, namespace=args.namespace,
-                      config_dir=args.config_dir, log_level=args.log_level, secure=args.secure, host=args.host)
+                      config_dir=args.config_dir, log_level=args.log_level, secure=args.secure, host=args.host,
+                      run_dir=args.run_dir)
 
 
 def secure_listen(directory: str, host: str | None) -> list[str]:
@@ -139,7 +140,7 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
                router_config: str | None = None, connect: list[str] | None = None,
                zenoh_config: str | None = None, namespace: str = "", config_dir: str | None = None,
                log_level: str = "INFO", secure: str | None = None,
-               host: str | None = None) -> tuple[list[ChildSpec], dict]:
+               host: str | None = None, run_dir: str | None = None) -> tuple[list[ChildSpec], dict]:
     """The children (router first, then ``services`` in order) and the facts ``status`` needs.
 
     ``overrides`` maps a service to its ``key=value`` settings. With our own router each
@@ -148,7 +149,8 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     a profile folder (``balltrack secure init``); the router is ``host``'s, each service its
     own role, and this program watches them as ``viewer``. Services of a router started here
     join it as peers (``--peer``), unless secure, given a Zenoh config or told to ``connect``
-    elsewhere."""
+    elsewhere. A simulator keeps its clock in ``run_dir``/simulator.clock, so that it goes on
+    across the supervisor's restarts (a ``--set clock_file=...`` of the caller's wins)."""
     python = sys.executable
     Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
@@ -219,14 +221,20 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             argv += ["--zenoh-config", absolute(zenoh_config)]
         elif peers:
             argv += ["--peer"]  # (direct links between this host's services: common/session.py)
+        state_files = []
         for name in names:
             if config_path is not None and (config_path / f"{name}.toml").is_file():
                 path = str(config_path / f"{name}.toml")
                 argv += ["--config", f"{name}={path}" if joined else path]
-            for override in overrides.get(name, []):
+            settings = list(overrides.get(name, []))
+            if name == "simulator" and run_dir:
+                state_files.append(str(Path(run_dir).resolve() / "simulator.clock"))
+                settings.insert(0, f"clock_file={state_files[-1]}")
+            for override in settings:
                 argv += ["--set", f"{name}.{override}" if joined else override]
         argv += ["--log-level", log_level]
-        specs.append(ChildSpec(process, argv, wait_alive=router and process != services[-1]))
+        specs.append(ChildSpec(process, argv, wait_alive=router and process != services[-1],
+                               state_files=state_files))
     # (the services themselves, each with its liveliness token, whichever process runs it)
     info = {"connect": connect, "namespace": namespace,
             "services": services_of(services),

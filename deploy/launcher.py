@@ -100,7 +100,7 @@ def start_system(run_dir: Path | str, services: tuple[str, ...] = SERVICES,
     specs, info = make_specs(list(services), {name: list(values) for name, values in (settings or {}).items()},
                              router=True, listen=[endpoint], namespace=namespace,
                              config_dir=str(config_dir) if config_dir else None, log_level=log_level,
-                             secure=str(secure) if secure else None, host=host)
+                             secure=str(secure) if secure else None, host=host, run_dir=str(run_dir))
     run_dir = Path(run_dir).resolve()
     launched = launch(run_dir, specs, info, wait=wait, output=output, tie_to_parent=True)
     return System(endpoint, run_dir, namespace, tuple(services), launched)

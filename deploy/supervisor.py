@@ -11,6 +11,8 @@ A run folder holds::
 
 Rules:
 
+* A child's ``state_files`` (the simulator's clock) are removed before its first start and
+  kept for its restarts.
 * Children start in order. A child with a ``port`` (the router) must accept TCP connections
   before the next one starts, so services find their router at once. A child with
   ``wait_alive`` must declare its liveliness token (at most ``alive_timeout`` s) before the
@@ -66,6 +68,9 @@ class ChildSpec:
     # At the first start, wait for this service's liveliness token before starting the next,
     # so that a pipeline is ready for the simulator's first frame (lockstep needs it).
     wait_alive: bool = False
+    # Files the child keeps for the next of its restarts (the simulator's clock): removed before
+    # its first start, so that a new supervisor's child starts afresh.
+    state_files: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -316,6 +321,12 @@ class Supervisor:
         return False
 
     def _start(self, child: Child) -> None:
+        if child.restarts == 0:
+            for state_file in child.spec.state_files:
+                try:
+                    Path(state_file).unlink(missing_ok=True)
+                except OSError as error:
+                    LOG.warning("%s: %s not removed (%s)", child.spec.name, state_file, error.strerror)
         child.start()
         LOG.info("started %s (pid %d)%s", child.spec.name, child.popen.pid,
                  f", restart {child.restarts}" if child.restarts else "")

@@ -81,6 +81,10 @@ class SimulatorConfig:
     publish_images: bool = param(True, "publish `camera/image_raw`; false stops the frames (a failed "
                                        "camera) while the world, clock and ground truth go on; can be "
                                        "changed live")
+    # (services/simulator/clock_file.py: the supervisor removes it before the first start)
+    clock_file: str = param("", "if set, keep a bound on the clock and frame number in this file and, when "
+                                "started again with it, go on after it instead of from 0; `balltrack "
+                                "deploy` sets <run folder>/simulator.clock")
     video_path: str = param("", "if set, record the rendered frames to this .mp4/.avi")
     ground_truth_path: str = param("", "if set, log ground truth to this JSON-lines file")
     timestep: float = param(0.002, "physics step (s), rounded to a whole number per camera frame; at most "

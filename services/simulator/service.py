@@ -13,7 +13,9 @@ last cmd_vel was taken; ``command_time``, the same in float seconds, stays for r
 field it was first); ``dropped`` counts realtime
 schedule slips (overload). ``pacing``, ``real_time_factor``, ``lockstep_*``, ``encoding``,
 ``jpeg_quality`` and ``publish_images`` (false: no more frames, as from a failed camera; the
-world, clock and ground truth go on) may be changed live through ``simulator/config``.
+world, clock and ground truth go on) may be changed live through ``simulator/config``. With
+``clock_file`` a simulator started again goes on with its predecessor's clock and frame numbers
+(services/simulator/clock_file.py).
 
 Lockstep, per frame k: image_raw + ground_truth; wait for ``detected_balls`` seq k (if a
 detector is alive and the image was published); clock; if a follower is alive and its
@@ -46,6 +48,7 @@ from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import LIVE_SETTINGS, SimulatorConfig
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate
 from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
+from balltrack.services.simulator.clock_file import ClockFile
 from balltrack.services.simulator.output_files import OutputFiles
 from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Simulation
 
@@ -68,7 +71,17 @@ def scenario_folder(configured: str):
 
 def build(service: ServiceContext):
     output_files = OutputFiles.from_config(service.config)
-    simulation = Simulation(service.config)
+    clock_file = ClockFile(service.config.clock_file) if service.config.clock_file else None
+    start_stamp, start_frame = 0, 0
+    if clock_file is not None:
+        try:
+            start_stamp, start_frame = clock_file.start()
+        except ValueError as error:  # (a simulator that cannot start would be no better)
+            service.log.warning("%s: the clock starts from 0", error)
+    simulation = Simulation(service.config, start_time=start_stamp / 1e9, start_frame=start_frame)
+    if start_stamp or start_frame:
+        service.log.info("clock goes on from %s: %.3f s, frame %d", clock_file.path, simulation.time,
+                         start_frame)
     simulation.render_view("front")  # the first render compiles shaders: not in frame 1's time
     # Each frame's message is a new megabyte: kept, not faulted in again (common/memory.py).
     keep_freed_memory()
@@ -86,6 +99,19 @@ def build(service: ServiceContext):
     # image and its ground truth (the core locks each call, not the sequence).
     frame_lock = threading.Lock()
     pending = collections.deque()  # valid cmd_vel (linear, angular), applied before a step
+
+    clock_file_error = {"reason": None}
+
+    def record_clock(now: float, next_write: float) -> None:
+        try:
+            clock_file.record(now, simulation.frame_index, next_write, simulation.period)
+        except OSError as error:  # (a full disk costs the file, never a frame)
+            if clock_file_error["reason"] is None:
+                service.log.warning("%s not written (%s): a restart may put the clock back",
+                                    clock_file.path, error.strerror)
+            clock_file_error["reason"] = error.strerror
+        else:
+            clock_file_error["reason"] = None
 
     def camera_info() -> dict:
         return {"header": header(simulation.stamp_ns, simulation.frame_index),
@@ -200,6 +226,8 @@ def build(service: ServiceContext):
         if now + 1e-6 >= next_info:  # (the core sums time steps: 0.99999... is 1 s)
             infos.put(camera_info())
             next_info = math.floor(now + 1e-6) + 1.0
+            if clock_file is not None:
+                record_clock(now, next_info)
         # Lockstep: time moves on once the detector has answered this frame, and, on the
         # frames whose clock makes the follower's timer fire, once its command is applied.
         lockstep = config.pacing == "lockstep"

@@ -81,15 +81,19 @@ def _locked(method):
 class Simulation:
     """One simulated world: physics, the robot's camera, scripted balls, and the SimCommands."""
 
-    def __init__(self, config: SimulatorConfig, scenario: Scenario | None = None):
+    def __init__(self, config: SimulatorConfig, scenario: Scenario | None = None,
+                 start_time: float = 0.0, start_frame: int = 0):
+        """``start_time`` (simulated s) and ``start_frame``: the clock and frame number before the
+        first frame, other than 0 when a restarted simulator goes on from its predecessor's
+        (services/simulator/clock_file.py)."""
         self.config = config
         self._lock = threading.RLock()
         self._model: mujoco.MjModel | None = None
         self._camera: SimCamera | None = None
-        self._frame_index = 0
+        self._frame_index = start_frame
         self.wall_time: float | None = None
         self.command_count = 0
-        self._load(scenario if scenario is not None else load_scenario(config.scenario), 0.0)
+        self._load(scenario if scenario is not None else load_scenario(config.scenario), start_time)
         self._restart()
 
     # -- construction -------------------------------------------------------------------------
@@ -154,7 +158,7 @@ class Simulation:
 
     @property
     def time(self) -> float:
-        """Simulated seconds since construction."""
+        """Simulated seconds, from ``start_time`` at construction."""
         return float(self._data.time)
 
     @property
@@ -164,7 +168,7 @@ class Simulation:
 
     @property
     def frame_index(self) -> int:
-        """Frames stepped so far (the seq of the current frame)."""
+        """The seq of the current frame: ``start_frame`` plus the frames stepped so far."""
         return self._frame_index
 
     @property

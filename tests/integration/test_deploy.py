@@ -17,7 +17,8 @@ import pytest
 
 from balltrack.common.messages import encode, header
 from balltrack.deploy.supervisor import pid_alive
-from tests.harness import REPO, Liveliness, Process, client, free_port, process_environment, wait_until
+from tests.harness import (REPO, Collector, Liveliness, Process, client, free_port, process_environment,
+                           wait_until)
 
 SERVICES = ["detector", "locator", "follower"]
 
@@ -96,6 +97,40 @@ def test_supervisor_restarts_a_killed_service_and_stops_cleanly(started):
     assert not [pid for pid in pids if pid_alive(pid)]
     # The locator's log holds both runs.
     assert (run_dir / "locator.log").read_text().count("=== ") == 2
+
+
+def test_a_simulator_restarted_by_the_supervisor_goes_on_with_its_clock(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    # Left by an earlier deployment in the same folder: a new deployment starts at 0 all the same.
+    (run_dir / "simulator.clock").write_text('{"stamp": 500000000000, "seq": 15000}')
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    result = deploy("start", "--router", "--listen", endpoint, "--services", "simulator", "--run-dir", str(run_dir),
+                    "--set", "simulator.publish_images=false", "--set", "simulator.width=160",
+                    "--set", "simulator.height=120", "--wait", "60")
+    assert result.returncode == 0, result.stdout + result.stderr
+    session = client(endpoint)
+    try:
+        truths = Collector(session, "sim/ground_truth", "GroundTruth")
+        liveliness = Liveliness(session)
+        first = truths.wait_for(lambda messages: messages[:5] if len(messages) >= 5 else None, 30, "frames")[0]
+        assert first["header"]["stamp"] < 100 * 10**9 and first["header"]["seq"] < 3000, first["header"]
+        old_pid = int((run_dir / "simulator.pid").read_text())
+        os.kill(old_pid, signal.SIGKILL)
+        liveliness.wait("simulator", alive=False, timeout=15)
+        before = len(truths.messages)
+        liveliness.wait("simulator", alive=True, timeout=60)
+        truths.wait_for(lambda messages: len(messages) >= before + 5, 30, "frames of the restarted simulator")
+    finally:
+        session.close()
+        stopped = deploy("stop", "--run-dir", str(run_dir))
+    assert stopped.returncode == 0, stopped.stdout + stopped.stderr
+    assert read_status(run_dir)["children"]["simulator"]["restarts"] == 1
+    # Across the restart, stamps and sequence numbers only go forward.
+    stamps = [truth["header"]["stamp"] for truth in truths.messages]
+    seqs = [truth["header"]["seq"] for truth in truths.messages]
+    assert all(a < b for a, b in zip(stamps, stamps[1:])), (before, stamps[before - 3:before + 3])
+    assert all(a < b for a, b in zip(seqs, seqs[1:])), (before, seqs[before - 3:before + 3])
 
 
 def test_start_rejects_bad_options_and_a_bad_config(tmp_path):

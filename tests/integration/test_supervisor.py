@@ -63,6 +63,21 @@ def test_exit_0_is_left_alone_crashes_are_retried_then_given_up(tmp_path):
     assert not list(tmp_path.glob("*.pid"))
 
 
+def test_a_childs_state_files_are_removed_before_its_first_start_and_kept_for_its_restarts(tmp_path):
+    state = tmp_path / "keeper.state"
+    state.write_text("left by an earlier supervisor")
+    # Says whether it found its state, leaves it, and crashes: restarted until given up.
+    code = (f"import pathlib; state = pathlib.Path({str(state)!r}); "
+            "print('found' if state.exists() else 'absent', flush=True); state.write_text('kept'); "
+            "raise SystemExit(3)")
+    spec = ChildSpec("keeper", [sys.executable, "-c", code], state_files=[str(state)])
+    thread, _ = run_in_thread(Supervisor(tmp_path, [spec], FAST))
+    thread.join(20)
+    assert not thread.is_alive()
+    found = [line for line in (tmp_path / "keeper.log").read_text().splitlines() if line in ("found", "absent")]
+    assert found == ["absent"] + ["found"] * FAST.give_up_after
+
+
 def test_stop_terminates_and_kills_what_ignores_sigterm(tmp_path):
     stubborn = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
                 "print('ready', flush=True); time.sleep(60)")

@@ -53,10 +53,22 @@ def test_services_joined_in_one_process_get_their_files_and_settings_by_name(tmp
     assert [joined[index + 1] for index, item in enumerate(joined) if item == "--set"] == \
         ["detector.v_min=30", "locator.mode=exact"]
     simulator = specs[2].argv
-    assert simulator[simulator.index("--set") + 1] == "seed=3"  # (alone: as before)
+    assert "seed=3" in simulator  # (alone: as before)
     # Liveliness and status go by service, whichever process runs it.
     assert info["services"] == ["detector", "locator", "simulator"]
     assert [spec.wait_alive for spec in specs] == [False, True, False]
+
+
+def test_the_simulator_keeps_its_clock_in_the_run_folder_for_its_restarts(tmp_path):
+    run_dir = tmp_path / "run"
+    specs, _ = specs_for("--router", "--listen", "tcp/0.0.0.0:7500", "--run-dir", str(run_dir),
+                         "--services", "detector+simulator,locator", "--set", "simulator.seed=3")
+    clock = str(run_dir / "simulator.clock")
+    joined = specs[1].argv
+    settings = [joined[index + 1] for index, item in enumerate(joined) if item == "--set"]
+    # (first: a clock_file of the caller's own comes after it and wins)
+    assert settings == [f"simulator.clock_file={clock}", "simulator.seed=3"]
+    assert specs[1].state_files == [clock] and specs[2].state_files == []
 
 
 def test_without_router_services_use_the_given_endpoint_or_the_zenoh_file(tmp_path):

@@ -323,6 +323,25 @@ def test_same_seed_same_commands_identical_ground_truth():
     assert not np.array_equal(images_a[0], images_c[0])
 
 
+def test_a_simulation_started_on_a_recorded_clock_goes_on_after_it():
+    # (a simulator restarted with its clock_file: the scenario starts afresh, the clock does not)
+    config = SimulatorConfig(width=160, height=120)
+    fresh = Simulation(config, load_scenario("moving"))
+    later = Simulation(config, load_scenario("moving"), start_time=12.5, start_frame=400)
+    try:
+        assert (later.stamp_ns, later.frame_index) == (12_500_000_000, 400)
+        for _ in range(10):
+            fresh.step_frame()
+            later.step_frame()
+        assert later.frame_index == 410 and later.time == pytest.approx(12.5 + fresh.time, abs=1e-9)
+        # Scripted motion counts from the start, wherever the clock began.
+        for moved, reference in zip(later.ground_truth()["balls"], fresh.ground_truth()["balls"]):
+            assert moved["position"] == pytest.approx(reference["position"], abs=1e-9)
+    finally:
+        fresh.close()
+        later.close()
+
+
 def snapshot(simulation):
     return (simulation.ground_truth(), simulation.light(), simulation.robot_velocity(),
             simulation.commanded_velocity(), simulation.time, simulation.scenario.name)
