@@ -6,16 +6,16 @@ the simulator is the camera). Every command carries it, in its header and in its
 * **chasing** (or arrived): the header of the detection message the controller last took in,
   unchanged, so latency from frame capture to command can be measured;
 * **searching**: no detection is being followed, so the command derives from no frame; it
-  carries the stamp and seq of the last detection message the follower received (an empty
-  ``detected_balls`` is a frame seen too);
+  carries the frame clock at the tick, with the seq of the last detection message received;
 * ``time`` (timer commands only): the frame clock at the tick.
 
 The frame clock at a tick is, with ``use_sim_time``, the ``clock`` stamp that fired the tick
 (the simulator publishes each frame's stamp on ``clock``; a lockstep simulator waits for a
 command whose ``time`` equals it); on the wall clock, the stamp of the last detection message
-received. Before any frame (no detection message and, with ``use_sim_time``, no ``clock`` yet)
-it is 0 with seq 0, ROS's "no time yet": a search spin at start-up is not put on the wall clock
-while the frames that follow are on another.
+received (an empty ``detected_balls`` is a frame seen too). Before any frame (no detection
+message and, with ``use_sim_time``, no ``clock`` yet) it is 0 with seq 0, ROS's "no time yet":
+a search spin at start-up is not put on the wall clock while the frames that follow are on
+another.
 
 The timer and the detection timeout keep running on the follower's own clock (wall or
 simulated); only what is stamped is decided here.
