@@ -31,7 +31,6 @@ DEFAULT_OPEN_TIMEOUT = float(os.environ.get("BALLTRACK_OPEN_TIMEOUT", "30"))
 # role, DIR/<host>/router.json5 per router; the settings naming files next to them.
 SECURE_CLIENT_CONFIG = "client.json5"
 ROUTER_CONFIG = "router.json5"
-ROUTER_USER = "router"
 SECURE_FILE_SETTINGS = tuple(f"transport/link/tls/{name}" for name in (
     "root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
     "connect_certificate")) + ("transport/auth/usrpwd/dictionary_file",)

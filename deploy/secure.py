@@ -9,11 +9,14 @@ camera frame and may publish ``cmd_vel``. The profile uses Zenoh's own mechanism
   here signs one certificate per router host and one per role; a client refuses a router whose
   certificate does not name the address it dials, a router refuses a client without a
   certificate from this CA.
-* **User and password** (``transport/auth/usrpwd``): one password per role, the router's
-  ``dictionary_file`` (``users.txt``, ``user:password`` per line).
+* **User and password** (``transport/auth/usrpwd``): one password per role and one per host's
+  router (user ``router-<host>``, for joining the other hosts' routers), the router's
+  ``dictionary_file`` (``users.txt``, ``user:password`` per line: the roles and the other hosts'
+  routers).
 * **Access control** (``access_control``, default ``deny``) on every router: a role is a subject
   (its certificate's common name AND its user name) allowed only its own keys: what it puts,
-  subscribes to, answers and asks, and its own liveliness token ``alive/<role>``.
+  subscribes to, answers and asks, and its own liveliness token ``alive/<role>``. Another host's
+  router passes everything, on router-to-router links only (see :func:`access_control`).
 
 Every process is a Zenoh client of a router: peers would mesh directly, around the routers'
 access control. What each role may do is :data:`ROLES` plus the key table
@@ -23,13 +26,16 @@ access control. What each role may do is :data:`ROLES` plus the key table
 The folder written by :func:`init_profile`::
 
     DIR/ca/ca.pem, ca.key        the authority (keep ca.key on this machine only)
-    DIR/<host>/router.json5      a router's config, with router.pem, router.key, ca.pem, users.txt
+    DIR/<host>/router.json5      a router's config, with router.pem, router.key (it listens with
+                                 them), router-link.pem, router-link.key (it joins other routers
+                                 with them), ca.pem, users.txt
     DIR/<role>/client.json5      a role's config, with <role>.pem, <role>.key, ca.pem, password
 
 The json5 files name their other files relative to their own folder (``ca.pem``): balltrack
 (``--secure DIR``) resolves them there, so a folder can be copied anywhere; ``zenohd -c`` and
 other Zenoh programs resolve them against the current directory (start them in that folder).
 Private keys, passwords, the users file and the json5 files holding a password are mode 0600.
+:func:`renew` replaces one role's or one host's key, certificate and password in place.
 """
 
 import datetime
@@ -44,12 +50,12 @@ from pathlib import Path
 
 from balltrack.common import keys as key_table
 from balltrack.common.keys import SERVICES, Keys
-from balltrack.common.session import (ROUTER_CONFIG, ROUTER_USER, SECURE_CLIENT_CONFIG, SECURE_FILE_SETTINGS,
+from balltrack.common.session import (ROUTER_CONFIG, SECURE_CLIENT_CONFIG, SECURE_FILE_SETTINGS, load_config_file,
                                       secure_client_path)
 
 DEFAULT_PORT = 7447
-# A leaf certificate lives about two years (CA/Browser Forum's old 825-day limit); re-run
-# `secure init --force` to renew. The authority lives ten.
+# A leaf certificate lives about two years (CA/Browser Forum's old 825-day limit); `secure renew`
+# replaces one, `secure init --force` all. The authority lives ten.
 LEAF_DAYS = 825
 CA_DAYS = 3650
 # Every message kind Zenoh 1.x access control knows.
@@ -148,8 +154,9 @@ def _rule(identifier: str, messages: list[str], flows: list[str], key_exprs: lis
             "key_exprs": key_exprs}
 
 
-def access_control(namespace: str = "", router_names: list[str] = ()) -> dict:
-    """The routers' ``access_control`` section: default deny, one subject and policy per role.
+def access_control(namespace: str = "", hosts: list[str] = ()) -> dict:
+    """The routers' ``access_control`` section: default deny, one subject and policy per role,
+    and with ``hosts`` (a cluster) the router-to-router links between them.
 
     A router checks what a client sends it (ingress) and what it forwards to a client (egress),
     so each operation needs both halves: a put is allowed in from its publisher and out to
@@ -188,14 +195,22 @@ def access_control(namespace: str = "", router_names: list[str] = ()) -> dict:
         rules += role_rules
         subjects.append({"id": role, "cert_common_names": [client_common_name(role)], "usernames": [role]})
         policies.append({"id": role, "rules": [rule["id"] for rule in role_rules], "subjects": [role]})
-    if router_names:
+    if hosts:
         # Routers of a cluster forward for their own clients, whose rights their own router
-        # checked: between routers everything passes. By certificate only: the router that
-        # dials learns the other's certificate but not a user name (usrpwd goes one way), and
-        # a subject with usernames would never match there.
+        # checked: between routers everything passes, on router-to-router links only. Each side
+        # of such a link knows the other by something else: the router that accepts it by the
+        # link certificate (client use only) AND the user name and password of the router that
+        # dialled; the router that dials (usrpwd goes one way: it learns no user name) by the
+        # other's listening certificate, which only a TLS server can present (server use only)
+        # and which names the address it dialled. A router's certificate or password alone, or
+        # with a role's password, is no router.
         rules.append(_rule("router", list(ALL_MESSAGES), ["ingress", "egress"], ["**"]))
-        subjects.append({"id": "router", "cert_common_names": [router_common_name(host) for host in router_names]})
-        policies.append({"id": "router", "rules": ["router"], "subjects": ["router"]})
+        for host in hosts:
+            subjects.append({"id": f"router {host} joining", "cert_common_names": [router_link_common_name(host)],
+                             "usernames": [router_user(host)]})
+            subjects.append({"id": f"router {host} joined", "cert_common_names": [router_common_name(host)]})
+        policies.append({"id": "router", "rules": ["router"],
+                         "subjects": [f"router {host} {side}" for host in hosts for side in ("joining", "joined")]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 
@@ -206,7 +221,19 @@ def client_common_name(role: str) -> str:
 
 
 def router_common_name(host: str) -> str:
+    """A router's listening certificate (a TLS server's only)."""
     return f"balltrack router {host}"
+
+
+def router_link_common_name(host: str) -> str:
+    """The certificate a router joins other routers with (a TLS client's only)."""
+    return f"balltrack router link {host}"
+
+
+def router_user(host: str) -> str:
+    """The user name a host's router joins the others' with (users.txt splits at the first
+    ``:``, which an IPv6 address holds; host names have no ``_``)."""
+    return f"router-{host.replace(':', '_')}"
 
 
 def _private_key():
@@ -275,8 +302,9 @@ def certificate_names(path: str) -> list[str]:
 def make_leaf(authority, common_name: str, names: list[str] = (), server: bool = False,
               days: int = LEAF_DAYS):
     """(private key, certificate) signed by ``authority``; ``names`` become subject alternative
-    names (an IP address literal as an IP entry). Every leaf may act as a TLS client (routers
-    dial other routers); ``server`` ones also as a server."""
+    names (an IP address literal as an IP entry). A leaf acts as a TLS client only, or with
+    ``server`` as a server only: a router's listening certificate cannot be presented to
+    another router as a client's (the access control knows a router that was dialled by it)."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.x509.oid import ExtendedKeyUsageOID
@@ -290,7 +318,7 @@ def make_leaf(authority, common_name: str, names: list[str] = (), server: bool =
             alternative.append(x509.IPAddress(ipaddress.ip_address(entry)))
         except ValueError:
             alternative.append(x509.DNSName(entry))
-    usages = [ExtendedKeyUsageOID.CLIENT_AUTH] + ([ExtendedKeyUsageOID.SERVER_AUTH] if server else [])
+    usages = [ExtendedKeyUsageOID.SERVER_AUTH if server else ExtendedKeyUsageOID.CLIENT_AUTH]
     builder = (x509.CertificateBuilder().subject_name(_name(common_name))
                .issuer_name(authority_certificate.subject).public_key(key.public_key())
                .serial_number(x509.random_serial_number())
@@ -371,25 +399,19 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
         shutil.rmtree(directory / name)
 
     authority = make_authority()
-    authority_pem = _certificate_pem(authority[1])
-    _write(directory / "ca" / "ca.pem", authority_pem)
+    _write(directory / "ca" / "ca.pem", _certificate_pem(authority[1]))
     _write(directory / "ca" / "ca.key", _key_pem(authority[0]), private=True)
 
-    passwords = {role: secrets.token_urlsafe(24) for role in ROLES}
-    router_password = secrets.token_urlsafe(24)
-    users = "".join(f"{user}:{password}\n" for user, password in
-                    [*passwords.items(), (ROUTER_USER, router_password)])
+    passwords = {name: secrets.token_urlsafe(24) for name in (*ROLES, *map(router_user, hosts))}
     acl = access_control(namespace, hosts if len(hosts) > 1 else [])
     tls_common = {"root_ca_certificate": "ca.pem", "enable_mtls": True, "verify_name_on_connect": True}
 
     for host in hosts:
         folder = directory / host
-        key, certificate = make_leaf(authority, router_common_name(host), router_names(host, local),
-                                     server=True, days=days)
-        _write(folder / "ca.pem", authority_pem)
-        _write(folder / "router.pem", _certificate_pem(certificate))
-        _write(folder / "router.key", _key_pem(key), private=True)
-        _write(folder / "users.txt", users, private=True)
+        _write_router_files(directory, authority, host, router_names(host, local), days)
+        # (not its own router's user: no one joins this router as itself)
+        _write(folder / "users.txt", "".join(f"{user}:{password}\n" for user, password in passwords.items()
+                                             if user != router_user(host)), private=True)
         settings = {
             "mode": "router",
             "listen": {"endpoints": [f"tls/0.0.0.0:{port}"]},
@@ -401,11 +423,13 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
                 # Only TLS: a plain tcp/ endpoint added by mistake would not even start.
                 "link": {"protocols": ["tls"],
                          "tls": {**tls_common, "listen_private_key": "router.key", "listen_certificate": "router.pem",
-                                 "connect_private_key": "router.key", "connect_certificate": "router.pem"}},
-                # dictionary_file checks clients; user/password are this router's own, for
-                # joining another host's router (balltrack deploy start --router-connect).
-                "auth": {"usrpwd": {"dictionary_file": "users.txt", "user": ROUTER_USER,
-                                    "password": router_password}},
+                                 "connect_private_key": "router-link.key",
+                                 "connect_certificate": "router-link.pem"}},
+                # dictionary_file checks clients and the other hosts' routers; user/password are
+                # this router's own, for joining another host's router (balltrack deploy start
+                # --router-connect).
+                "auth": {"usrpwd": {"dictionary_file": "users.txt", "user": router_user(host),
+                                    "password": passwords[router_user(host)]}},
             },
             "access_control": acl,
         }
@@ -416,13 +440,9 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
         _write(folder / ROUTER_CONFIG, _json5(header, settings), private=True)
 
     local_endpoint = f"tls/localhost:{port}" if local else f"tls/{_endpoint_host(hosts[0])}:{port}"
-    for role, password in passwords.items():
+    for role in ROLES:
         folder = directory / role
-        key, certificate = make_leaf(authority, client_common_name(role), days=days)
-        _write(folder / "ca.pem", authority_pem)
-        _write(folder / f"{role}.pem", _certificate_pem(certificate))
-        _write(folder / f"{role}.key", _key_pem(key), private=True)
-        _write(folder / "password", password + "\n", private=True)
+        _write_role_files(directory, authority, role, passwords[role], days)
         settings = {
             "mode": "client",
             "connect": {"endpoints": [local_endpoint], "timeout_ms": 30000,
@@ -432,7 +452,7 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
                 "link": {"protocols": ["tls"],
                          "tls": {**tls_common, "connect_private_key": f"{role}.key",
                                  "connect_certificate": f"{role}.pem"}},
-                "auth": {"usrpwd": {"user": role, "password": password}},
+                "auth": {"usrpwd": {"user": role, "password": passwords[role]}},
             },
         }
         header = (f"balltrack secure profile: role {role}.\n"
@@ -447,10 +467,99 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
             "client_endpoint": local_endpoint}
 
 
+def _write_router_files(directory: Path, authority, host: str, names: list[str], days: int) -> None:
+    """A host's certificates and keys: router.pem to listen with (its ``names``), router-link.pem
+    to join other routers with."""
+    folder = directory / host
+    _write(folder / "ca.pem", _certificate_pem(authority[1]))
+    for stem, common_name, server in (("router", router_common_name(host), True),
+                                      ("router-link", router_link_common_name(host), False)):
+        key, certificate = make_leaf(authority, common_name, names if server else [], server=server, days=days)
+        _write(folder / f"{stem}.pem", _certificate_pem(certificate))
+        _write(folder / f"{stem}.key", _key_pem(key), private=True)
+
+
+def _write_role_files(directory: Path, authority, role: str, password: str, days: int) -> None:
+    folder = directory / role
+    key, certificate = make_leaf(authority, client_common_name(role), days=days)
+    _write(folder / "ca.pem", _certificate_pem(authority[1]))
+    _write(folder / f"{role}.pem", _certificate_pem(certificate))
+    _write(folder / f"{role}.key", _key_pem(key), private=True)
+    _write(folder / "password", password + "\n", private=True)
+
+
+def profile_hosts(directory: Path | str) -> list[str]:
+    """The hosts of a profile: its folders holding a router config."""
+    return sorted(path.parent.name for path in Path(directory).glob(f"*/{ROUTER_CONFIG}"))
+
+
+def _replace_password(config_path: Path, password: str) -> None:
+    """Put ``password`` in place of the one ``config_path`` holds (transport/auth/usrpwd), the
+    rest of the file as it is (hand edits kept)."""
+    old = json.loads(load_config_file(config_path).get_json("transport/auth/usrpwd/password"))
+    text = config_path.read_text()
+    if not old or text.count(json.dumps(old)) != 1:
+        raise ProfileError(f"{config_path}: its password is not in the file once, as written; "
+                           "`secure init --force` writes the profile anew")
+    _write(config_path, text.replace(json.dumps(old), json.dumps(password)), private=True)
+
+
+def _set_user(users_path: Path, user: str, password: str) -> bool:
+    """Replace ``user``'s password in a users.txt; False when it has no such user."""
+    lines = users_path.read_text().splitlines()
+    found = [index for index, line in enumerate(lines) if line.split(":", 1)[0] == user]
+    for index in found:
+        lines[index] = f"{user}:{password}"
+    if found:
+        _write(users_path, "".join(line + "\n" for line in lines), private=True)
+    return bool(found)
+
+
+def renew(directory: Path | str, names: list[str], days: int = LEAF_DAYS) -> dict:
+    """A new key, certificate and password for each role or host of ``names``, signed by the
+    profile's CA, in place: the rest of the profile (the other keys, the access control) stays.
+    A role: its folder and its line in every host's users.txt; a host: its router's
+    certificates, keys and password (router.json5) and its line in the other hosts' users.txt.
+    The routers read users.txt when they start. {"changed": folders written, "users": the
+    users.txt files changed}; ProfileError (one line) for a name the profile lacks or no CA key.
+    """
+    directory = Path(directory)
+    hosts = profile_hosts(directory)
+    for name in names:
+        if name not in ROLES and name not in hosts:
+            raise ProfileError(f"{name!r} is neither a role ({', '.join(ROLES)}) nor a host of {directory} "
+                               f"({', '.join(hosts) or 'none'})")
+        if name in ROLES and not (directory / name / SECURE_CLIENT_CONFIG).is_file():
+            raise ProfileError(f"no {directory / name / SECURE_CLIENT_CONFIG}: renew where the whole profile is")
+    try:
+        from cryptography import x509
+        from cryptography.hazmat.primitives import serialization
+
+        authority = (serialization.load_pem_private_key((directory / "ca" / "ca.key").read_bytes(), None),
+                     x509.load_pem_x509_certificate((directory / "ca" / "ca.pem").read_bytes()))
+    except FileNotFoundError as error:
+        raise ProfileError(f"no {error.filename}: renew on the machine that keeps the profile's CA") from None
+    users_changed = []
+    for name in names:
+        password = secrets.token_urlsafe(24)
+        if name in ROLES:
+            _write_role_files(directory, authority, name, password, days)
+            _replace_password(directory / name / SECURE_CLIENT_CONFIG, password)
+            user = name
+        else:
+            _write_router_files(directory, authority, name, certificate_names(directory / name / "router.pem"), days)
+            _replace_password(directory / name / ROUTER_CONFIG, password)
+            user = router_user(name)
+        users_changed += [str(directory / host / "users.txt") for host in hosts
+                          if _set_user(directory / host / "users.txt", user, password)]
+    return {"changed": [str(directory / name) for name in names], "users": sorted(set(users_changed))}
+
+
 def client_files(directory: Path | str, role: str) -> Path:
     """A role's client config in a profile (for programs that start processes)."""
     return secure_client_path(directory, role)
 
 
 __all__ = ["ROLES", "Role", "Permissions", "permissions", "access_control", "init_profile", "ProfileError",
-           "parse_hosts", "router_names", "make_authority", "make_leaf", "client_files", "SECURE_FILE_SETTINGS"]
+           "parse_hosts", "router_names", "make_authority", "make_leaf", "client_files", "renew", "profile_hosts",
+           "SECURE_FILE_SETTINGS"]

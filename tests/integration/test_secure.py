@@ -301,9 +301,10 @@ def test_roles_grant_what_the_services_declare(tmp_path):
         assert entities.get("publisher", set()) == set(granted.puts), (service, entities)
 
 
-def test_two_hosts_routers_join_and_keep_the_rules(tmp_path):
-    """A router per host (both on this machine), the second joining the first: a follower on
-    one host moves commands to a simulator on the other, a locator's do not cross."""
+@pytest.fixture
+def two_hosts(tmp_path):
+    """A profile of two hosts and a router per host (both on this machine), hostb's joining
+    hosta's: (profile, hosta's port, hostb's port)."""
     directory = tmp_path / "profile"
     init_profile(directory, ["hosta", "hostb"])
     first, second = free_port(), free_port()
@@ -314,6 +315,13 @@ def test_two_hosts_routers_join_and_keep_the_rules(tmp_path):
                             "--listen", f"tls/127.0.0.1:{second}", "--connect", f"tls/localhost:{first}"],
                            tmp_path / "b.log"))
     routers[1].wait_for_output("listening on", 20)
+    yield directory, first, second
+    assert [router.stop() for router in routers] == [0, 0], [router.output() for router in routers]
+
+
+def test_two_hosts_routers_join_and_keep_the_rules(two_hosts):
+    """A follower on one host moves commands to a simulator on the other, a locator's do not cross."""
+    directory, first, second = two_hosts
     as_role = lambda role, port: open_session([f"tls/localhost:{port}"],  # noqa: E731
                                               str(secure_client_path(directory, role)), open_timeout=10)
     simulator, follower, locator = as_role("simulator", first), as_role("follower", second), as_role("locator", second)
@@ -324,7 +332,53 @@ def test_two_hosts_routers_join_and_keep_the_rules(tmp_path):
     assert b"from the locator" not in {message["payload"] for message in commands.messages}
     for session in (simulator, follower, locator):
         session.close()
-    assert [router.stop() for router in routers] == [0, 0]
+
+
+def test_a_routers_folder_does_not_make_a_client_of_another_hosts_router(two_hosts):
+    """A client holding hosta's router folder (its certificates and keys, the router password of
+    its router.json5, the role passwords of its users.txt) joins hostb's router: it is refused,
+    or it may neither put cmd_vel nor read. (It used to be let in as a router: put cmd_vel, read
+    everything.) Left out: the folder's own identity, its link certificate with its own router
+    password, which is router hosta itself."""
+    directory, first, second = two_hosts
+    folder = directory / "hosta"
+    own = load_config_file(folder / "router.json5")
+    router_user = json.loads(own.get_json("transport/auth/usrpwd/user"))
+    users = dict(line.split(":", 1) for line in (folder / "users.txt").read_text().splitlines())
+    # Its own router's password, a role's, and hostb's router's (hosta's users.txt lets hostb join it)
+    passwords = {router_user: json.loads(own.get_json("transport/auth/usrpwd/password")), "viewer": users["viewer"],
+                 "router-hostb": users["router-hostb"]}
+    simulator = open_session([f"tls/localhost:{first}"], str(secure_client_path(directory, "simulator")), open_timeout=10)
+    follower = open_session([f"tls/localhost:{second}"], str(secure_client_path(directory, "follower")), open_timeout=10)
+    opened = [simulator, follower]
+    try:
+        commands = Collector(simulator, "cmd_vel", None)
+        put_until_seen(follower, "cmd_vel", b"from the follower", commands, timeout=20)
+        tried = []
+        for certificate in sorted(folder.glob("router*.pem")):
+            for user, password in passwords.items():
+                if certificate.name == "router-link.pem" and user == router_user:
+                    continue
+                tried.append((certificate.name, user))
+                config = role_config(directory, "locator", second, **{
+                    "transport.link.tls.connect_certificate": str(certificate),
+                    "transport.link.tls.connect_private_key": str(certificate.with_suffix(".key")),
+                    "transport.auth.usrpwd.user": user, "transport.auth.usrpwd.password": password})
+                try:
+                    opened.append(zenoh.open(config))
+                except zenoh.ZError:
+                    continue  # refused: it never joined
+                seen = Collector(opened[-1], "**", None)
+                payload = f"from {certificate.name} as {user}".encode()
+                with pytest.raises(AssertionError, match="no .* in 2 s"):
+                    put_until_seen(opened[-1], "cmd_vel", payload, commands, timeout=2)
+                put_until_seen(follower, "cmd_vel", b"after " + payload, commands)
+                # (its own puts come back to it within its session)
+                assert [m for m in seen.messages if m["payload"] != payload] == [], (certificate.name, user)
+        assert len(tried) == 5
+    finally:
+        for session in opened:
+            session.close()
 
 
 def test_a_config_query_the_access_control_drops_says_it_may_be_that(profile, simulator, secure_router):

@@ -1,6 +1,7 @@
 """balltrack secure init: the files, their modes, the certificates and the access rules."""
 
 import ipaddress
+import json
 import stat
 
 import pytest
@@ -37,7 +38,7 @@ def common_name(cert: x509.Certificate) -> str:
 def test_secrets_are_private_and_certificates_readable(profile):
     private = [profile / "ca" / "ca.key"]
     for host in ("robot", "192.168.1.10"):
-        private += [profile / host / name for name in ("router.key", "users.txt", "router.json5")]
+        private += [profile / host / name for name in ("router.key", "router-link.key", "users.txt", "router.json5")]
     for role in ROLES:
         private += [profile / role / name for name in (f"{role}.key", "password", "client.json5")]
     assert {path.name: mode(path) for path in private} == {path.name: 0o600 for path in private}
@@ -54,8 +55,16 @@ def test_router_certificates_name_the_host_and_localhost(profile, tmp_path):
     by_address = certificate(profile / "192.168.1.10" / "router.pem")
     addresses = by_address.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert ipaddress.ip_address("192.168.1.10") in addresses.get_values_for_type(x509.IPAddress)
+    # It listens with router.pem (a server's only) and joins other routers with router-link.pem
+    # (a client's only, no names): the access control tells the two apart.
     usages = router.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
-    assert set(usages) == {ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH}
+    assert list(usages) == [ExtendedKeyUsageOID.SERVER_AUTH]
+    link = certificate(profile / "robot" / "router-link.pem")
+    link.verify_directly_issued_by(authority)
+    assert common_name(link) == "balltrack router link robot"
+    assert list(link.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value) == [ExtendedKeyUsageOID.CLIENT_AUTH]
+    with pytest.raises(x509.ExtensionNotFound):
+        link.extensions.get_extension_for_class(x509.SubjectAlternativeName)
 
     init_profile(tmp_path / "remote", ["robot"], local=False)
     remote = certificate(tmp_path / "remote" / "robot" / "router.pem")
@@ -66,7 +75,8 @@ def test_router_certificates_name_the_host_and_localhost(profile, tmp_path):
 def test_each_role_has_a_certificate_a_password_and_a_users_entry(profile):
     authority = certificate(profile / "ca" / "ca.pem")
     users = dict(line.split(":", 1) for line in (profile / "robot" / "users.txt").read_text().splitlines())
-    assert set(users) == set(ROLES) | {"router"}
+    # (the other host's router joins this one; this one's own user is in no users.txt of its own)
+    assert set(users) == set(ROLES) | {"router-192.168.1.10"}
     passwords = set()
     for role in ROLES:
         cert = certificate(profile / role / f"{role}.pem")
@@ -86,6 +96,10 @@ def test_each_role_has_a_certificate_a_password_and_a_users_entry(profile):
     assert router.get_json("transport/auth/usrpwd/dictionary_file") == f'"{profile.resolve() / "robot" / "users.txt"}"'
     assert router.get_json("listen/endpoints") == '["tls/0.0.0.0:7447"]'
     assert router.get_json("access_control/default_permission") == '"deny"'
+    assert router.get_json("transport/auth/usrpwd/user") == '"router-robot"'
+    other = dict(line.split(":", 1) for line in (profile / "192.168.1.10" / "users.txt").read_text().splitlines())
+    assert other["router-robot"] == json.loads(router.get_json("transport/auth/usrpwd/password"))
+    assert other["router-robot"] != users["router-192.168.1.10"] and "router-192.168.1.10" not in other
     assert isinstance(zenoh.Config.from_file(str(profile / "robot" / "router.json5")), zenoh.Config)
 
 
@@ -147,9 +161,16 @@ def test_access_control_subjects_need_both_certificate_and_user(tmp_path):
     subjects = {subject["id"]: subject for subject in acl["subjects"]}
     assert subjects["locator"] == {"id": "locator", "cert_common_names": ["balltrack locator"],
                                    "usernames": ["locator"]}
-    assert subjects["router"] == {"id": "router", "cert_common_names": ["balltrack router a", "balltrack router b"]}
+    # Another host's router: by its link certificate AND its own router user when it dials in,
+    # by its listening (server-only) certificate when dialled; never by a certificate name alone
+    # that a client could present.
+    assert subjects["router a joining"] == {"id": "router a joining", "cert_common_names": ["balltrack router link a"],
+                                            "usernames": ["router-a"]}
+    assert subjects["router b joined"] == {"id": "router b joined", "cert_common_names": ["balltrack router b"]}
+    (router_policy,) = [policy for policy in acl["policies"] if policy["id"] == "router"]
+    assert router_policy["subjects"] == ["router a joining", "router a joined", "router b joining", "router b joined"]
     assert rules["follower put"]["key_exprs"] == ["robot1/cmd_vel", "robot1/follower/stats"]
     assert rules["viewer query"]["key_exprs"] == ["@/**"]  # the admin space has no namespace
     for policy in acl["policies"]:
-        assert all(rules[rule]["id"].split()[0] == policy["subjects"][0] for rule in policy["rules"])
-    assert "router" not in {subject["id"] for subject in access_control("", [])["subjects"]}
+        assert all(rules[rule]["id"].split()[0] == policy["subjects"][0].split()[0] for rule in policy["rules"])
+    assert not any(subject["id"].startswith("router") for subject in access_control("", [])["subjects"])
