@@ -34,8 +34,9 @@ ROUTER_CONFIG = "router.json5"
 SECURE_FILE_SETTINGS = tuple(f"transport/link/tls/{name}" for name in (
     "root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
     "connect_certificate")) + ("transport/auth/usrpwd/dictionary_file",)
-# Who the `balltrack` commands (status, echo, config, sim...) are in a secure profile.
-DEFAULT_COMMAND_ROLE = "operator"
+# Who the `balltrack` commands (status, echo, config, sim...) are in a secure profile: one that
+# reads; pub, sim, config and play ask for --role operator (balltrack/cli/session.py).
+DEFAULT_COMMAND_ROLE = "viewer"
 
 
 def default_endpoints() -> list[str]:
@@ -59,7 +60,8 @@ def add_session_arguments(parser: argparse.ArgumentParser, config_file: bool = T
                         help="a secure profile (balltrack secure init): use DIR/<role>/client.json5")
     if role is None:
         parser.add_argument("--role", default=DEFAULT_COMMAND_ROLE, metavar="ROLE",
-                            help=f"the role with --secure (default {DEFAULT_COMMAND_ROLE}; viewer only reads)")
+                            help=f"the role with --secure (default {DEFAULT_COMMAND_ROLE}: it reads; pub, sim, "
+                                 "config and play need operator)")
     else:
         parser.set_defaults(role=role)
     if peer:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report, refused_for_role
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.keys import Keys
@@ -89,6 +89,9 @@ def command_config(args) -> int:
             changes = parse_overrides(operands[1:]) if action is None else {}
     except ConfigError as error:
         print(f"balltrack config: {error}", file=sys.stderr)
+        return 2
+    # (a read too: the access control cannot tell a query that reads from one that sets)
+    if refused_for_role(args, "queries", [key_table.config_key(service)]):
         return 2
     if args.describe:
         status, parameters = ask(args, service, {"describe": True, **({"set": changes} if changes else {})},

@@ -4,7 +4,7 @@ import json
 import sys
 from pathlib import Path
 
-from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report, refused_for_role
 from balltrack.common import keys as key_table
 from balltrack.common.config import ConfigError, parse_overrides
 from balltrack.common.messages import SIM_OPS
@@ -187,6 +187,8 @@ def command_sim(args) -> int:
         checked_form(request)
     except (ConfigError, ValueError) as error:
         print(f"balltrack sim: {error}", file=sys.stderr)
+        return 2
+    if refused_for_role(args, "queries", [key_table.SIM_CONTROL]):
         return 2
     session = open_or_report(args, stop_on_signals())  # (see cli/config.ask)
     if session is None:

@@ -12,7 +12,7 @@ import time
 
 import yaml
 
-from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report, refused_for_role
 from balltrack.common.arguments import integer, zero_or
 from balltrack.common.keys import Keys
 from balltrack.common.messages import SCHEMAS, MessageError, encode, header, shorten
@@ -45,18 +45,6 @@ def payload_maker(message_name: str, message: dict):
     return stamped
 
 
-def role_may_put(role: str, key: str) -> bool:
-    """Whether a secure profile's ``role`` may put on ``key`` (without the namespace) as
-    ``balltrack secure init`` writes its access control; True for a role it does not know."""
-    import zenoh
-
-    from balltrack.deploy.secure import ROLES, permissions
-
-    if role not in ROLES:
-        return True
-    return any(zenoh.KeyExpr(allowed).includes(zenoh.KeyExpr(key)) for allowed in permissions(role).puts)
-
-
 def command_pub(args) -> int:
     keys = Keys(args.namespace)
     message_name = args.type or keys.message_of(keys(args.key))
@@ -69,10 +57,8 @@ def command_pub(args) -> int:
     except MessageError as error:
         print(f"balltrack pub: {message_name}: {error}", file=sys.stderr)
         return 2
-    if getattr(args, "secure", None) and not role_may_put(args.role, args.key):
-        # (the router drops it without a word: "published 14" would be no news of it)
-        print(f"balltrack pub: warning: role {args.role} may not put on {args.key} in the profile's access "
-              "control: the router drops these messages", file=sys.stderr)
+    if refused_for_role(args, "puts", [args.key]):
+        return 2
     stop = stop_on_signals()
     session = open_or_report(args, stop)
     if session is None:

@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 
 from balltrack.cli.output import Output
 from balltrack.common.terminal import silence_closed_stdout
-from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.cli.session import close_or_report, networked, open_or_report, refused_for_role
 from balltrack.common.arguments import seconds, unwritable_reason, zero_or
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.recording import RecordingError, RecordingFile
@@ -134,6 +134,8 @@ def command_play(args) -> int:
         if args.start > duration:
             return _fail(args, f"--start {args.start:g} s is past the recording's end ({duration:.3f} s "
                                "after its first message): nothing to play", 2)
+        if refused_for_role(args, "puts", [channel.key for channel in recording.channels() if channel.topic in topics]):
+            return 2
         stop = stop_on_signals()
         session = open_or_report(args, stop)
         if session is None:

@@ -168,8 +168,8 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["run", "detector+locator", "--secure", "secure"], "--secure: a secure setup gives each service"),
     # (a profile that is not there: said at once, as a bad --zenoh-config is; status 1 before)
     (["run", "locator", "--secure", "no-profile"], "locator: --secure: no no-profile/locator/client.json5"),
-    (["echo", "detected_ball", "--secure", "no-profile"], "--secure: no no-profile/operator/client.json5"),
-    (["hz", "detected_ball", "--secure", "no-profile", "--role", "viewer"], "--secure: no no-profile/viewer/client.json5"),
+    (["echo", "detected_ball", "--secure", "no-profile"], "--secure: no no-profile/viewer/client.json5"),
+    (["hz", "detected_ball", "--secure", "no-profile", "--role", "operator"], "--secure: no no-profile/operator/client.json5"),
     (["run", "detector+locator", "--set", "v_min=3"], "expected SERVICE.KEY=VALUE"),
     (["run", "detector+locator", "--set", "follower.keep_target=false"], "follower is not among this process's detector, locator"),
     (["run", "detector+locator", "--set", "locator.bogus=1"], "detector+locator: locator: bogus: unknown parameter"),
