@@ -10,6 +10,7 @@ opens, and every message to or from it is dropped. Frames are small (160x120) to
 """
 
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -379,6 +380,27 @@ def test_a_routers_folder_does_not_make_a_client_of_another_hosts_router(two_hos
     finally:
         for session in opened:
             session.close()
+
+
+def test_a_renewed_roles_old_credentials_are_refused_and_the_others_still_join(tmp_path):
+    from balltrack.cli import main
+
+    directory = tmp_path / "profile"
+    init_profile(directory, ["testhost"])
+    shutil.copytree(directory / "operator", tmp_path / "old" / "operator")
+    assert main(["secure", "renew", str(directory), "operator"]) == 0
+    port = free_port()
+    router = Process([sys.executable, "-m", "balltrack", "router", "--secure", str(directory),
+                      "--listen", f"tls/127.0.0.1:{port}"], tmp_path / "router.log")
+    try:
+        router.wait_for_output("listening on", 20)
+        assert_refused(role_config(tmp_path / "old", "operator", port))
+        for role in ("operator", "locator"):  # the renewed one, one left as it was
+            session = zenoh.open(role_config(directory, role, port))
+            assert len(session.info.routers_zid()) == 1, role
+            session.close()
+    finally:
+        assert router.stop() == 0, router.output()
 
 
 # A command's client-side role check left out, as by a client of its own: what reaches the

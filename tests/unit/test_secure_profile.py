@@ -174,3 +174,45 @@ def test_access_control_subjects_need_both_certificate_and_user(tmp_path):
     for policy in acl["policies"]:
         assert all(rules[rule]["id"].split()[0] == policy["subjects"][0].split()[0] for rule in policy["rules"])
     assert not any(subject["id"].startswith("router") for subject in access_control("", [])["subjects"])
+
+
+def users(path) -> dict[str, str]:
+    return dict(line.split(":", 1) for line in path.read_text().splitlines())
+
+
+def test_renew_replaces_one_roles_or_hosts_credentials_and_keeps_the_rest(tmp_path, capsys):
+    directory = tmp_path / "p"
+    init_profile(directory, ["a", "b"])
+    files = {path: path.read_bytes() for path in directory.rglob("*") if path.is_file()}
+    assert main(["secure", "renew", str(directory), "operator,b"]) == 0
+    changed = {path.relative_to(directory).as_posix() for path, data in files.items() if path.read_bytes() != data}
+    assert changed == {"operator/operator.pem", "operator/operator.key", "operator/password", "operator/client.json5",
+                       "a/users.txt", "b/users.txt", "b/router.pem", "b/router.key", "b/router-link.pem",
+                       "b/router-link.key", "b/router.json5"}
+    operator = (directory / "operator" / "password").read_text().strip()
+    assert users(directory / "a" / "users.txt")["operator"] == users(directory / "b" / "users.txt")["operator"] == operator
+    config = load_config_file(directory / "operator" / "client.json5")
+    assert config.get_json("transport/auth/usrpwd/password") == json.dumps(operator)
+    router = load_config_file(directory / "b" / "router.json5")
+    assert users(directory / "a" / "users.txt")["router-b"] == json.loads(router.get_json("transport/auth/usrpwd/password"))
+    authority = certificate(directory / "ca" / "ca.pem")
+    certificate(directory / "operator" / "operator.pem").verify_directly_issued_by(authority)
+    listening = certificate(directory / "b" / "router.pem")
+    assert listening.extensions.get_extension_for_class(x509.SubjectAlternativeName).value \
+        .get_values_for_type(x509.DNSName) == ["b", "localhost"]
+    assert "copy these to their hosts and restart the routers" in capsys.readouterr().out
+    assert mode(directory / "operator" / "password") == mode(directory / "a" / "users.txt") == 0o600
+
+
+@pytest.mark.parametrize("names, reason", [
+    ("nobody", "'nobody' is neither a role"), ("", "name a role or a host"), ("ca", "'ca' is neither a role")])
+def test_renew_refuses_what_the_profile_lacks_in_one_line(names, reason, tmp_path, capsys):
+    init_profile(tmp_path / "p", ["a"])
+    before = (tmp_path / "p" / "a" / "users.txt").read_text()
+    assert main(["secure", "renew", str(tmp_path / "p"), names]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and reason in error, error
+    (tmp_path / "p" / "ca" / "ca.key").unlink()
+    assert main(["secure", "renew", str(tmp_path / "p"), "viewer"]) == 2
+    assert "ca.key: renew on the machine that keeps the profile's CA" in capsys.readouterr().err
+    assert (tmp_path / "p" / "a" / "users.txt").read_text() == before
