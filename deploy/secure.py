@@ -531,6 +531,10 @@ def renew(directory: Path | str, names: list[str], days: int = LEAF_DAYS) -> dic
                                f"({', '.join(hosts) or 'none'})")
         if name in ROLES and not (directory / name / SECURE_CLIENT_CONFIG).is_file():
             raise ProfileError(f"no {directory / name / SECURE_CLIENT_CONFIG}: renew where the whole profile is")
+        if name in hosts and not (directory / name / "router-link.pem").is_file():
+            # (its router.json5 dials with router.pem, which a new one could not do)
+            raise ProfileError(f"host {name}'s folder has no router-link.pem (a profile of an earlier "
+                               "balltrack): `secure init --force` writes it anew")
     try:
         from cryptography import x509
         from cryptography.hazmat.primitives import serialization

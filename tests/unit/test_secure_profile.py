@@ -216,3 +216,11 @@ def test_renew_refuses_what_the_profile_lacks_in_one_line(names, reason, tmp_pat
     assert main(["secure", "renew", str(tmp_path / "p"), "viewer"]) == 2
     assert "ca.key: renew on the machine that keeps the profile's CA" in capsys.readouterr().err
     assert (tmp_path / "p" / "a" / "users.txt").read_text() == before
+
+
+def test_renew_refuses_a_host_of_a_profile_without_link_certificates(tmp_path, capsys):
+    # (an earlier profile: its router dials with router.pem, which a renewed one could not)
+    init_profile(tmp_path / "p", ["a"])
+    (tmp_path / "p" / "a" / "router-link.pem").unlink()
+    assert main(["secure", "renew", str(tmp_path / "p"), "a"]) == 2
+    assert "no router-link.pem" in capsys.readouterr().err
