@@ -6,7 +6,8 @@
 #      (headless, the Rerun viewer's screenshot test), installed
 #      with apt-get only when missing (sudo when not root);
 #   2. a virtual environment .venv at the repository root (Python >= 3.11);
-#   3. pip install -e '.[test]' into it, again only when pyproject.toml changed since the last
+#   3. pip install -e '.[test,train]' into it (train: torch's CPU build, for the learned
+#      detector's training and its tests), again only when pyproject.toml changed since the last
 #      install or a dependency cannot be found;
 #   4. the detector's compiled functions compiled into numba's cache (services/detector/jit.py).
 #
@@ -77,14 +78,14 @@ installed="$(cat "$STAMP" 2>/dev/null || true)"
 importable() {
     .venv/bin/python - <<'PY' 2>/dev/null
 import importlib.util, sys
-modules = ("zenoh", "cv2", "numpy", "numba", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest",
+modules = ("zenoh", "cv2", "numpy", "numba", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest", "torch", "onnx", "onnxruntime",
            "pytest_timeout", "hypothesis", "importlinter", "balltrack.common", "balltrack.services", "balltrack.deploy")
 sys.exit(any(importlib.util.find_spec(name) is None for name in modules))
 PY
 }
 if [ "$installed" != "$wanted" ] || ! importable; then
-    say "installing balltrack and its dependencies into .venv (pip install -e '.[test]')"
-    .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
+    say "installing balltrack and its dependencies into .venv (pip install -e '.[test,train]')"
+    .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test,train]'
     echo "$wanted" > "$STAMP"
 fi
 

@@ -12,9 +12,11 @@ READMEs say:
   the box centre;
 - a detection whose centre lies in no box at all (small balls included) is a false positive.
 
-Each set is scored with the balltrack detector (default settings plus any changes) and with the
-paper's plain pipeline (``detector_speed.PlainDetector``: blur, HSV, CLAHE on V, ``inRange``,
-``HoughCircles``, no checks) on the same images. Goal of issue 9, per set: recall >= 90 % of
+Each set is scored with the balltrack detector (default settings plus any changes), with each of
+its two methods (``learned``, ``rules``: the configured one is "balltrack", whose figures the goal
+reads), and with the paper's plain pipeline (``detector_speed.PlainDetector``: blur, HSV, CLAHE on V, ``inRange``,
+``HoughCircles``, no checks) on the same images; each with recall, false positives per image
+and average precision (the area under its precision-recall curve over the detections' scores). Goal of issue 9, per set: recall >= 90 % of
 the counted balls and at most 0.20 false positives per image, with one set of settings. How
 far a set's figures hold: on other draws of its photos (``resampled``) and on copies of them
 nudged in ways no one would see (``nudged``).
@@ -31,6 +33,7 @@ The photos are only read: nothing of them is copied into the output folder but f
 numbers.
 """
 
+import dataclasses
 import json
 import math
 import os
@@ -47,8 +50,8 @@ from balltrack.common.images import UnreadableImage, read_image
 from balltrack.common.terminal import exit_with
 from balltrack.experiments.detector_speed import PlainDetector
 from balltrack.experiments.photo_variants import NUDGES, VARIANTS, Variant
-from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector, Detection
+from balltrack.services.detector.config import DetectorConfig, Method
+from balltrack.services.detector.detector import BallDetector, Detection, build_detector
 from balltrack.services.detector.explain import explain_place, finds, summary
 
 MIN_BALL_PX = 20
@@ -61,8 +64,8 @@ Detect = Callable[[np.ndarray], list]
 
 
 def balltrack_detect(config: DetectorConfig) -> Detect:
-    """The balltrack detector as a function of a frame."""
-    detector = BallDetector(config)
+    """The balltrack detector (``config.method``'s) as a function of a frame."""
+    detector = build_detector(config)
     return lambda image: detector.detect(image).detections
 
 
@@ -117,14 +120,37 @@ def counted_balls(boxes: list[dict], min_ball_px: int = MIN_BALL_PX) -> list[tup
 
 
 def score_image(boxes: list[dict], detections: list, min_ball_px: int = MIN_BALL_PX) -> dict:
-    """Score one image's detections (objects with ``u``, ``v``) against its labelled boxes."""
+    """Score one image's detections (objects with ``u``, ``v``, ``score``) against its labelled
+    boxes; ``outcomes``: per detection, best score first, [score, 1] when it is the first to
+    find a counted ball, [score, 0] when it is a false positive (neither: not listed)."""
     counted = counted_balls(boxes, min_ball_px)
     found = 0
     for centre_u, centre_v, radius in counted:
         if any(finds(d.u, d.v, centre_u, centre_v, radius) for d in detections):
             found += 1
     false_positives = sum(1 for d in detections if not any(_box_contains(b, d.u, d.v) for b in boxes))
-    return {"labelled": len(counted), "found": found, "false_positives": false_positives}
+    outcomes, unmatched = [], list(counted)
+    for d in sorted(detections, key=lambda detection: detection.score, reverse=True):
+        ball = next((ball for ball in unmatched if finds(d.u, d.v, *ball)), None)
+        if ball is not None:
+            unmatched.remove(ball)
+            outcomes.append([float(d.score), 1])
+        elif not any(_box_contains(b, d.u, d.v) for b in boxes):
+            outcomes.append([float(d.score), 0])
+    return {"labelled": len(counted), "found": found, "false_positives": false_positives, "outcomes": outcomes}
+
+
+def average_precision(outcomes: list[list], labelled: int) -> float:
+    """The area under a set's precision-recall curve (every point, precision made falling):
+    ``outcomes`` are all its images' (see ``score_image``), ranked by score together."""
+    if labelled == 0:
+        return 1.0
+    ranked = sorted(outcomes, key=lambda outcome: outcome[0], reverse=True)
+    hits = np.cumsum([outcome[1] for outcome in ranked]) if ranked else np.zeros(0)
+    precision = hits / np.arange(1, len(ranked) + 1) if ranked else np.zeros(0)
+    # (the precision at a recall is the best at that recall or any higher)
+    precision = np.maximum.accumulate(precision[::-1])[::-1]
+    return float(sum(precision[index] for index, outcome in enumerate(ranked) if outcome[1]) / labelled)
 
 
 def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | None = None,
@@ -133,7 +159,7 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
     ``folder`` and score it; ``variant``: each image and its boxes altered first (see
     ``photo_variants.py``).
 
-    Returns ``recall`` (found / labelled), ``false_positives_per_image``, ``found``,
+    Returns ``recall`` (found / labelled), ``false_positives_per_image``, ``average_precision``, ``found``,
     ``labelled``, ``false_positives``, ``images``, ``median_ms`` (detector time per image) and
     ``files``: per file ``{labelled, found, false_positives, detections: [{u, v, radius_px,
     score}]}``.
@@ -162,6 +188,8 @@ def score_folder(folder, config: DetectorConfig | None = None, detect: Detect | 
     timings.sort()
     return {
         **rates(labelled, found, false_positives, len(files)),
+        "average_precision": average_precision([outcome for entry in files.values() for outcome in entry["outcomes"]],
+                                               labelled),
         "found": found,
         "labelled": labelled,
         "false_positives": false_positives,
@@ -321,12 +349,17 @@ def spare_text(scored: dict) -> str:
 
 def score_sets(folders: list[Path], config: DetectorConfig, plain: bool = True,
                variant: Variant | None = None) -> dict[str, dict]:
-    """Per set (folder name): ``{"balltrack": score_folder(...), "plain": ... or None}``;
+    """Per set (folder name): ``{"balltrack": score_folder(...), "learned": ..., "rules": ...,
+    "plain": ... or None}``: balltrack is the detector ``config`` makes, learned and rules the
+    same settings with each method (one of them is balltrack's figures again);
     ``variant``: of altered copies of the photos (see ``score_folder``)."""
     scores = {}
     for folder in folders:
-        scores[folder.name] = {
-            "balltrack": score_folder(folder, detect=balltrack_detect(config), variant=variant),
+        ours = score_folder(folder, detect=balltrack_detect(config), variant=variant)
+        scores[folder.name] = {"balltrack": ours, **{
+            str(method): ours if method == config.method else score_folder(
+                folder, detect=balltrack_detect(dataclasses.replace(config, method=method)), variant=variant)
+            for method in Method},
             "plain": score_folder(folder, detect=plain_detect(config), variant=variant) if plain else None}
     return scores
 
@@ -335,14 +368,15 @@ def _figures(scored: dict | None) -> str:
     if scored is None:
         return "-"
     return (f"{scored['recall']:.3f} ({scored['found']}/{scored['labelled']}), "
-            f"FP {scored['false_positives_per_image']:.2f}/image")
+            f"FP {scored['false_positives_per_image']:.2f}/image, AP {scored['average_precision']:.2f}")
 
 
 def summary_rows(scores: dict[str, dict]) -> list[list]:
-    """Per set: name, images, counted balls, balltrack's and the plain pipeline's figures,
-    balltrack's distance from the goal (``to_spare``) and the goal's verdict."""
+    """Per set: name, images, counted balls, the learned detector's, the rules' and the plain
+    pipeline's figures, balltrack's (the configured method's) distance from the goal
+    (``to_spare``) and the goal's verdict."""
     return [[name, both["balltrack"]["images"], both["balltrack"]["labelled"],
-             _figures(both["balltrack"]), _figures(both["plain"]), spare_text(both["balltrack"]),
+             *(_figures(both.get(detector)) for detector in COMPARED), spare_text(both["balltrack"]),
              "PASS" if meets_goal(both["balltrack"]) else "MISS"]
             for name, both in scores.items()]
 
@@ -360,8 +394,11 @@ def resampled_balltrack(scores: dict[str, dict]) -> dict[str, dict]:
 RESAMPLED_HEADERS = ["set", "balltrack: recall, 95 % interval", "false positives per image, 95 % interval",
                      f"resampled sets meeting the goal (of {RESAMPLES})"]
 
-SUMMARY_HEADERS = ["set", "images", "balls >= 20 px", "balltrack: recall, false positives",
-                   "plain pipeline: recall, false positives", "balltrack: to spare", "goal"]
+# The detectors side by side in the summary: balltrack's two methods and the paper's pipeline.
+COMPARED = ("learned", "rules", "plain")
+SUMMARY_HEADERS = ["set", "images", "balls >= 20 px", "learned: recall, false positives, AP",
+                   "rules: recall, false positives, AP", "plain pipeline: recall, false positives, AP",
+                   "balltrack: to spare", "goal"]
 
 
 def run(options) -> "ExperimentResult":
@@ -389,9 +426,10 @@ def run(options) -> "ExperimentResult":
                        "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles (same settings)"}
     result.figure("skipped", False)
     resampled_sets = resampled_balltrack(scores)
+    result.settings["balltrack"] = f"method {config.method}"
     for name, both in scores.items():
         for detector, scored in both.items():
-            for key in ("recall", "false_positives_per_image", "found", "labelled",
+            for key in ("recall", "false_positives_per_image", "average_precision", "found", "labelled",
                         "false_positives", "images", "median_ms"):
                 result.figure(f"{name}/{detector}/{key}", scored[key])
         ours = both["balltrack"]
@@ -408,7 +446,9 @@ def run(options) -> "ExperimentResult":
                        f"recall {percent(ours['recall'])}, {ours['false_positives_per_image']:.2f} "
                        f"false positives per image ({ours['images']} images)")
     result.table(SUMMARY_HEADERS, summary_rows(scores),
-                 "Per set, the balltrack detector beside the paper's plain pipeline on the same photos:")
+                 f"Per set, balltrack's learned detector and its rules beside the paper's plain pipeline on the "
+                 f"same photos (AP: average precision over the detections' scores); the goal is the "
+                 f"configured method's ({config.method}):")
     result.table(RESAMPLED_HEADERS, resampled_rows(resampled_sets),
                  f"How much the balltrack figures owe to which photos a set holds: {RESAMPLES} sets "
                  f"of as many images drawn with replacement from each (an image's balls stay "
@@ -540,11 +580,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.summary:
         for name, both in scores.items():
             print_images(name, both["balltrack"])
-    print(f"{SUMMARY_HEADERS[0]:<20} {SUMMARY_HEADERS[1]:>6} {'balls':>6}  {'balltrack':<36} "
-          f"{'plain pipeline':<36} {'to spare':<18} "
-          f"goal (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
-    for name, images, balls, ours, plain, spare, goal in summary_rows(scores):
-        print(f"{name:<20} {images:>6} {balls:>6}  {ours:<36} {plain:<36} {spare:<18} {goal}")
+    print(f"{SUMMARY_HEADERS[0]:<20} {SUMMARY_HEADERS[1]:>6} {'balls':>6}  {'learned':<45} {'rules':<45} "
+          f"{'plain pipeline':<45} {'to spare':<18} "
+          f"goal of {config.method} (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
+    for name, images, balls, learned, rules, plain, spare, goal in summary_rows(scores):
+        print(f"{name:<20} {images:>6} {balls:>6}  {learned:<45} {rules:<45} {plain:<45} {spare:<18} {goal}")
     print(f"\n{'set':<20} {'balltrack: recall, 95 % interval':<34} {'FP per image, 95 % interval':<29} "
           f"resampled sets meeting the goal ({RESAMPLES}, images drawn with replacement)")
     for name, recall, false_positives, share in resampled_rows(resampled_balltrack(scores)):

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector, Detection
+from balltrack.services.detector.detector import Detection, build_detector
 from balltrack.services.follower.config import FollowerConfig
 from balltrack.services.follower.controller import Command, FollowerController
 from balltrack.common.pinhole import Intrinsics
@@ -155,7 +155,7 @@ class Perception:
         self.config = SimulatorConfig(**(simulator or {}))
         scene = scenario if isinstance(scenario, Scenario) else build_scenario(scenario)
         self.sim = Simulation(self.config, scene)
-        self.detector = BallDetector(detector or DetectorConfig())
+        self.detector = build_detector(detector or DetectorConfig())
         self.info = self.sim.camera_info()
         self.intrinsics = Intrinsics.from_camera_info(self.info)
         self.width, self.height = self.info["width"], self.info["height"]

@@ -46,9 +46,16 @@ def _deploy(arguments: list[str]) -> int:
     return deploy_main(arguments, prog="balltrack deploy")
 
 
+def _train(arguments: list[str]) -> int:
+    from balltrack.training.train import main as train_main
+
+    return interruptible(lambda: train_main(arguments), "balltrack train")
+
+
 # Commands with a parser of their own, handed every argument after their name (--help too).
 DELEGATED = {"deploy": ("start or stop the system under the supervisor (deploy --help)", _deploy),
-             "experiment": ("run an experiment (experiment --help)", _experiment)}
+             "experiment": ("run an experiment (experiment --help)", _experiment),
+             "train": ("train the learned detector's network on simulator renders (train --help)", _train)}
 
 
 def build_parser() -> ArgumentParser:

@@ -22,7 +22,7 @@ from balltrack.common.shutdown import stop_on_signals
 def command_detect(args) -> int:
     from balltrack.common.images import UnreadableImage, read_image
     from balltrack.services.detector.config import DetectorConfig
-    from balltrack.services.detector.detector import BallDetector
+    from balltrack.services.detector.detector import BallDetector, build_detector
     from balltrack.services.detector.explain import explain_place, summary
     from balltrack.services.detector.mask import check_image
 
@@ -32,7 +32,10 @@ def command_detect(args) -> int:
     except (ConfigError, ValueError) as error:
         print(f"balltrack detect: {error}", file=sys.stderr)
         return 2
-    detector = BallDetector(config)
+    if places and config.method != "rules":
+        print("balltrack detect: --explain reads the rules' checks: use it with method=rules", file=sys.stderr)
+        return 2
+    detector = BallDetector(config) if places else build_detector(config)
     stop = stop_on_signals()
     status = 0
     for path in args.images:

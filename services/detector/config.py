@@ -10,9 +10,18 @@ Example::
     balltrack run detector --set h_min=22 --set param2=18
 """
 
+import enum
 from dataclasses import dataclass
 
 from balltrack.common.config import ConfigError, check_fields, param
+
+
+class Method(enum.StrEnum):
+    """How candidates are judged: by the hand-written checks (``detector.py``) or by the network
+    trained in the simulator (``learned.py``)."""
+
+    rules = "rules"
+    learned = "learned"
 
 
 @dataclass
@@ -23,6 +32,9 @@ class DetectorConfig:
     normalisation (global gain, then CLAHE), so ``v_min``/``v_max`` are relative to the frame,
     not absolute pixel values.
     """
+
+    method: Method = param(Method.rules, "how balls are told from the rest: rules (the hand-written checks) or "
+                                         "learned (the network trained on simulator renders, models/ball_network.onnx)")
 
     # HSV colour range of the target. Tennis-ball felt measures H 29-44 (5th-95th percentile)
     # in sun and shade, S mostly above 150 (less in highlights); 25 keeps orange (H <= ~20)

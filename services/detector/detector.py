@@ -402,3 +402,14 @@ def compile_kernels() -> float:
     for image in (frame, dark):
         detector.detect(image)
     return time.perf_counter() - started
+
+
+def build_detector(config: DetectorConfig | None = None):
+    """The detector ``config.method`` names: a :class:`BallDetector` (rules) or a
+    ``learned.LearnedDetector``; both have ``detect(image_bgr) -> DetectionResult``."""
+    config = config if config is not None else DetectorConfig()
+    if config.method == "learned":
+        from balltrack.services.detector.learned import LearnedDetector
+
+        return LearnedDetector(config)
+    return BallDetector(config)

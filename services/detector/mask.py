@@ -194,10 +194,11 @@ class ColourMasker:
         self._part_clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit)
                             if config.clahe_clip_limit > 0 else None)
 
-    def planes(self, image_bgr: np.ndarray, boxes: list[Box] | None = None) -> ColourPlanes:
+    def planes(self, image_bgr: np.ndarray, boxes: list[Box] | None = None, whole: bool = False) -> ColourPlanes:
         """The cleaned colour mask of a checked BGR frame, with the planes the checks read.
         ``boxes``: the regions of interest to compute the mask in, in place of those the coarse
-        search finds (see ``BallDetector.detect``)."""
+        search finds (see ``BallDetector.detect``); ``whole``: the frame done whole, never by
+        regions (with the pale plane when that pass is on)."""
         config = self.config
         small = quarter_sample(image_bgr)
         # (the sample's HSV serves the reference level, its V, and the regions' coarse search)
@@ -213,7 +214,7 @@ class ColourMasker:
         # and no opening (the averaged mask has no specks, and a small lit cap would not
         # survive it).
         dark = config.dark_gain > 0 and gain >= config.dark_gain
-        if not dark and regions_apply(gained.shape):
+        if not dark and not whole and regions_apply(gained.shape):
             # (nearest-neighbour sampling commutes with the per-pixel gain: the regions' coarse
             # search reads the same sample of the gained frame)
             if gain > 1.0:

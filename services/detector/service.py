@@ -21,7 +21,7 @@ from balltrack.common.context import ServiceContext
 from balltrack.common.runner import run_service
 from balltrack.services.detector.annotate import annotate
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import BallDetector, compile_kernels
+from balltrack.services.detector.detector import build_detector, compile_kernels
 from balltrack.services.detector.mask import MIN_IMAGE_SIDE
 
 
@@ -50,12 +50,12 @@ def build(service: ServiceContext):
     every = service.publisher(keys.DETECTED_BALLS, "Ball2DArray")
     annotated = service.publisher(keys.IMAGE_OUT, "Image")
     tuning = service.publisher(keys.IMAGE_TUNING, "Image")
-    detector = {"core": BallDetector(service.config)}
+    detector = {"core": build_detector(service.config)}
     use_threads(service.config)
 
     def on_config_change(config: DetectorConfig) -> None:
         use_threads(config)
-        detector.update(core=BallDetector(config))
+        detector.update(core=build_detector(config))
 
     service.on_config_change(on_config_change)
 

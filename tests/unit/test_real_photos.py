@@ -281,3 +281,27 @@ def test_nudged_figures_spread_over_the_copies(tmp_path):
     assert (figures["recall_min"], figures["recall_median"], figures["recall_max"]) == (0.0, 0.5, 1.0)
     assert figures["pass_share"] == 0.5
     assert real_photos.nudged_text(figures)[2] == "1 of 2"
+
+
+def test_average_precision_ranks_every_image_s_outcomes_together():
+    # two balls found, one false positive: AP 1 when the false one ranks last, less above them
+    assert real_photos.average_precision([[0.9, 1], [0.8, 1], [0.1, 0]], labelled=2) == pytest.approx(1.0)
+    # (precisions 1/2 and 2/3 at the two balls; the first takes the better one after it)
+    assert real_photos.average_precision([[0.9, 0], [0.8, 1], [0.7, 1]], labelled=2) == pytest.approx(2 / 3)
+    assert real_photos.average_precision([[0.9, 1], [0.8, 0], [0.7, 0], [0.6, 1]], labelled=2) == pytest.approx(
+        (1 + 2 / 4) / 2)
+    # a ball never found caps it at the share found
+    assert real_photos.average_precision([[0.9, 1]], labelled=2) == pytest.approx(0.5)
+    assert real_photos.average_precision([], labelled=0) == 1.0
+
+
+def test_score_image_lists_each_detection_once_best_first():
+    boxes = [{"x": 80, "y": 80, "w": 40, "h": 40}]
+    Detection = real_photos.Detection
+    detections = [Detection(100.0, 100.0, 20.0, 0.6), Detection(101.0, 100.0, 20.0, 0.9),
+                  Detection(300.0, 300.0, 20.0, 0.7), Detection(85.0, 85.0, 5.0, 0.8)]
+    scored = real_photos.score_image(boxes, detections)
+    # the best of the two on the ball finds it; the other is neither found nor false; the one in
+    # the box's corner is not a false positive
+    assert scored["outcomes"] == [[0.9, 1], [0.7, 0]]
+    assert (scored["found"], scored["false_positives"]) == (1, 1)
