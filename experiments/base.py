@@ -10,7 +10,9 @@ result holds
 * ``tables``: markdown tables for the report (the paper's figure beside ours where it has one);
 * ``plots``: PNG files written into the output folder;
 * ``mode``: how it ran: ``in-process`` (simulator, detector and locator cores called directly),
-  ``zenoh`` (the real service processes), ``offline`` (image files) or ``skipped``.
+  ``zenoh`` (the real service processes), ``offline`` (image files) or ``skipped``;
+* ``date``, ``command`` and ``machine``: when and with which command it ran, and the machine's
+  speed then (:func:`machine_speed`), which timings are to be read against.
 
 :func:`write_outputs` merges results into ``DIR/results.json`` (one entry per experiment, a
 rerun replaces its entry) and rewrites ``DIR/report.md`` from the merged file.
@@ -124,10 +126,9 @@ SPEED_BLURS = 20
 # And what a small piece of work (encoding a Ball2D message: Python validation, then msgpack)
 # costs back to back and after the process has been idle for a 30 Hz camera's frame period,
 # as a service is between frames (p50 of SPEED_IDLE_CALLS calls each). Idle, the code and data
-# leave the CPU's caches: on this project's 2-core machines the encode took 9 us back to back
-# and 106 us after 33 ms idle. Each step of the demo's latency pays that kind of cost, so the
-# latency follows the two figures above only loosely: a day whose Python loop was 5-9x faster
-# than another's had a demo latency only 1.05-1.25x lower.
+# leave the CPU's caches, and the call after it pays to fetch them again, many times the back
+# to back cost. Each step of the demo's latency pays that kind of cost, so the latency follows
+# the idle figure more than the two above.
 SPEED_IDLE = 1.0 / 30.0
 SPEED_IDLE_CALLS = 45
 
@@ -139,9 +140,8 @@ def machine_speed() -> dict[str, float]:
     ``encode_after_idle_us`` (see SPEED_IDLE).
 
     The same code's milliseconds change from machine to machine and, on a shared machine, from
-    day to day: the balltrack detector took 1.82 ms per render on 11-23 and 3.68 ms on 11-25.
-    It is bound by Python, the plain pipeline by OpenCV, so their ratio moves with these two
-    figures, measured in the same run.
+    hour to hour. The balltrack detector is bound by Python, the plain pipeline by OpenCV, so
+    their ratio moves with these two figures, measured in the same run.
     """
     import cv2
     import numpy as np
@@ -188,8 +188,10 @@ def encode_costs() -> dict[str, float]:
 
 
 def record_machine_speed(result: "ExperimentResult") -> None:
-    """``machine_speed``'s figures as ``<experiment>/machine/...`` and a line in the report."""
+    """``machine_speed``'s figures as ``result.machine``, as figures ``<experiment>/machine/...``
+    and a line in the report."""
     speed = machine_speed()
+    result.machine = dict(speed)
     for name, value in speed.items():
         result.figure(f"machine/{name}", value)
     result.notes.append(f"Machine speed in this run: {SPEED_LOOP_ADDITIONS:,} additions in a Python loop "
@@ -198,6 +200,11 @@ def record_machine_speed(result: "ExperimentResult") -> None:
                         f"{speed['encode_us']:.0f} us back to back, {speed['encode_after_idle_us']:.0f} us "
                         f"after {SPEED_IDLE * 1000:.0f} ms idle (what resuming costs, as a service does "
                         "on each frame); on another day or machine, compare timings relative to these.")
+
+
+def now_text() -> str:
+    """The local date and time to the minute, as results state when they were made."""
+    return time.strftime("%Y-%m-%d %H:%M")
 
 
 def _read_lines(path: str) -> list[str]:
@@ -238,6 +245,11 @@ class ExperimentResult:
     paper: list[list[str]] = field(default_factory=list)
     # What it ran on: timings in ms are the machine's and the libraries' as much as the code's.
     environment: dict[str, str] = field(default_factory=environment)
+    # When it ran (its start), the command that ran it, and machine_speed's figures in that run
+    # (record_machine_speed, or ``balltrack experiment`` for an experiment that records none).
+    date: str = field(default_factory=now_text)
+    command: str = ""
+    machine: dict[str, float] = field(default_factory=dict)
 
     def compare(self, what: str, paper: str, ours: str) -> None:
         self.paper.append([what, paper, ours])
@@ -420,6 +432,8 @@ def render_report(merged: dict[str, Any]) -> str:
         if entry.get("environment"):
             versions = ", ".join(f"{key} {value}" for key, value in entry["environment"].items())
             lines += [f"**Environment:** {versions}", ""]
+        if entry.get("date"):
+            lines += [f"**Date:** {entry['date']}" + (f" (`{entry['command']}`)" if entry.get("command") else ""), ""]
         for note in entry.get("notes", []):
             lines += [note, ""]
         for table in entry.get("tables", []):

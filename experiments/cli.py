@@ -7,6 +7,10 @@ NAME is one of the experiments below or ``all``. Every run writes into DIR:
 * ``report.md``: the tables (the paper's figures beside ours), the goals, how each experiment
   ran (in-process or over Zenoh) and the plots (PNG files, also in DIR).
 
+Each experiment's entry also holds its date, this command and the machine's speed in the run
+(``base.machine_speed``); ``python -m balltrack.experiments.results_doc DIR`` turns the file
+into docs/results.md.
+
 ``--quick`` runs every experiment with small frame budgets (all of them in a few minutes);
 ``--frames N`` sets the budget per condition (frames, or runs for tracking) explicitly.
 
@@ -19,6 +23,7 @@ Examples::
 """
 
 import importlib
+import shlex
 import sys
 import traceback
 from pathlib import Path
@@ -26,7 +31,7 @@ from pathlib import Path
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import exit_with
 from balltrack.experiments.base import (PHOTOS_DEFAULT_TEXT, PHOTOS_VARIABLE, SHARED_PHOTOS, ExperimentResult,
-                                        Options, Stopwatch, development_photos, write_outputs)
+                                        Options, Stopwatch, development_photos, machine_speed, write_outputs)
 from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
@@ -125,15 +130,21 @@ def run_one(name: str, options: Options) -> tuple[ExperimentResult, bool]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    options = parse(list(sys.argv[1:] if argv is None else argv))
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    options = parse(arguments)
     names = list(EXPERIMENTS) if options.name == "all" else [options.name]
     options.out.mkdir(parents=True, exist_ok=True)
     clock = Stopwatch()
     ok = True
+    speed: dict[str, float] = {}
     for name in names:
         print(f"[{name}] running{' (quick)' if options.quick else ''} ...", file=sys.stderr)
         result, succeeded = run_one(name, options)
         ok = ok and succeeded
+        result.command = shlex.join(["balltrack", "experiment", *arguments])
+        if not result.machine:  # (measured once per command, for the experiments that time nothing)
+            speed = speed or machine_speed()
+            result.machine = dict(speed)
         # Written after each experiment so that a long `all` leaves usable partial results.
         write_outputs(options.out, [result], list(EXPERIMENTS))
         missed = [goal.name for goal in result.goals if not goal.passed]
