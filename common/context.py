@@ -22,9 +22,8 @@ from balltrack.common.messages import MessageError, decode, encode, shorten
 
 # Samples Zenoh holds for ``subscribe_latest``'s worker while it is busy (RingChannel: when
 # full, the oldest goes, uncounted): a call would have to last as long as this many frames of
-# the camera (0.27 s at 30 Hz) to lose one from ``dropped``. The worker's direct wake-up served
-# frames ~0.2 ms sooner than a hand-over from a callback (demo, frame -> detected_ball p50 3.7
-# and 3.7 ms against 3.9 and 3.9, two runs each).
+# the camera (0.27 s at 30 Hz) to lose one from ``dropped``. The worker waits on Zenoh's channel
+# itself: a hand-over from a callback would add a thread wake-up to every frame's path.
 LATEST_RING = 8
 # Seconds spent, on this thread, in handlers that the current handler's puts called: with
 # several services in one process a put runs a subscriber of the same session at once, and

@@ -4,17 +4,16 @@ A service that handles camera frames allocates and frees megabytes a frame: copi
 frame, planes, patches. By default glibc hands memory back to the system as soon as a few
 megabytes are free at the top of its heap, and serves large blocks from mappings of their own
 that it unmaps when they are freed; the next frame then takes a page fault for every 4 KB it
-touches again: the detector took 6,000-16,000 a second while the demo's ball was large, and
-the demo's recorder about 10,000 a second all along, up to 5 us each on this project's
-virtual machines. Keeping freed memory makes a frame's memory cost what the last one's did.
+touches again, thousands a second for a service of 640x480 frames at 30 Hz, each costing
+microseconds on a virtual machine. Keeping freed memory makes a frame's memory cost what the
+last one's did.
 Real-time programs do this (ros-realtime's ``minimal_memory_lock`` example turns trimming and
 mmap off altogether); here both stay bounded, so a huge frame's memory still goes back.
 
 The processes that take every camera frame call it: the detector service and ``balltrack
-record``; and those that make them, the simulator and camera services: a 640x480 frame went
-from ``put`` to a subscriber's callback in 2.33-2.38 ms when its publisher made each message in
-fresh memory, 1.19-1.28 ms when it kept it (``python -m balltrack.experiments.frame_transport``,
-three subscribers, with the publisher's call left out in a local edit for the first figure).
+record``; and those that make them, the simulator and camera services, whose frames reach
+their subscribers sooner when each message is made in kept memory rather than fresh memory
+(``python -m balltrack.experiments.frame_transport`` measures a frame's trip).
 Services of small messages do not need it (a few dozen faults a second), and keep their
 resident memory as small as their use. ``release_freed_memory`` does the opposite, once:
 for a large structure rebuilt rarely (the simulator's scenario reload).

@@ -7,8 +7,8 @@ packing so a service never publishes what its peers would reject. Extra fields a
 refused: there it is a typo or an ask this service cannot do, and read as a plain read it would
 be answered ok while nothing changed. Nothing here ever unpickles or evaluates data.
 
-Which clock every time field carries, and what a simulator's restart does to it: the README's
-*Clocks* under "The contract". In short, data messages are on the frames' clock, Stats' ``stamp``
+Which clock every time field carries, and what a simulator's restart does to it: docs/contract.md,
+*Clocks*. In short, data messages are on the frames' clock, Stats' ``stamp``
 on the wall clock.
 """
 
@@ -35,9 +35,9 @@ SIM_OPS = ("reset", "set_light", "place_ball", "place_robot")
 DISTORTION_MODELS = ("plumb_bob", "", "none")
 # Bins of at least this many bytes at a message's top level (a frame's pixels) are not copied
 # out of the payload by ``decode``: they come back as read-only memoryviews of it. msgpack
-# copies every bin into a new bytes object, and a 640x480 frame's copy cost 0.25 ms of a
-# 0.27 ms decode when the decoding process had been idle for a frame period (0.07 ms back to
-# back), on the path from frame to detection.
+# copies every bin into a new bytes object, and for a frame that copy is most of the decode,
+# on the path from frame to detection (all the more in a process that was idle between frames,
+# its caches cold).
 SHARED_BIN_MIN = 1 << 16
 # msgpack's first byte and length-field size of the bin formats that can hold SHARED_BIN_MIN
 # bytes (bin 16, bin 32; bin 8 holds at most 255).

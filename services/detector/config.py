@@ -122,10 +122,8 @@ class DetectorConfig:
     work_width: int = param(640, "wider frames are shrunk to this before processing (px); 0 = full size",
                             low=64, off=0)
     # A frame makes dozens of small OpenCV calls, each of which wakes the pool's other threads:
-    # on the demo's frames, 33 ms apart on a 2-core machine, one thread took p50 3.24-3.29 ms a
-    # frame against 3.35-3.42 ms with two (in one process, alternated), and leaves the other
-    # core to the camera and Zenoh. In whole demos the difference was within their run-to-run
-    # noise (frame -> 3D p50 5.3-5.5 against 5.3-5.6 ms, four runs in a slow hour).
+    # on frames the demo's size that costs about what the second thread saves, and one thread
+    # leaves the other cores to the camera and Zenoh.
     threads: int = param(1, "OpenCV threads of the detector service's process (cv2.setNumThreads); "
                             "0 = OpenCV's default, one per core", low=0, high=64)
 

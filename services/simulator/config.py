@@ -71,9 +71,8 @@ class SimulatorConfig:
     image_noise: float = param(0.0, "standard deviation of Gaussian pixel noise (0-255 levels); 0 = none",
                                low=0, high=100)
     # bgr8 is OpenCV's (the detector's) channel order: the frame needs no conversion on its way
-    # to the detector (the simulator converts before the frame's delivery time). In the demo,
-    # frame -> detected_ball_3d p50 9.0/9.6 -> 8.5/8.0 ms, the detector's handler 6.6/7.0 ->
-    # 5.7/5.5 ms (two demos each, alternated, 2026-11-26).
+    # to the detector, which shortens the path from frame to detection (the simulator converts
+    # before the frame's delivery time, off that path).
     encoding: Encoding = param(Encoding.bgr8, "published image encoding: `bgr8`, `rgb8` or `jpeg`; can be "
                                               "changed live")
     jpeg_quality: int = param(90, "JPEG quality (1-100); can be changed live", low=1, high=100)

@@ -192,7 +192,7 @@ def build(service: ServiceContext):
         if config.pacing == "realtime":
             # A camera exposes just before it delivers. Rendering right after the last publish
             # would put the software rasteriser's threads on both cores while the detector works
-            # on that frame (frame -> detected_ball_3d 8.0 ms p50 in the demo against 5.x).
+            # on that frame, and delay its detection.
             realtime_wait(lambda live: pacer.start_delay(simulation.time + simulation.period,
                                                          live.real_time_factor, time.monotonic(), work.lead()))
         started_work = time.perf_counter()
