@@ -3,7 +3,7 @@
 Each service declares one ``@dataclass`` whose fields are declared with :func:`param`: the
 default, a one-line meaning and the bounds, all next to the field. Everything else reads that
 one declaration: the generic validation (:func:`check_fields`, type, bounds, choices), the
-service's ``--help``, the README's parameter tables (``deploy/params.py``) and the live
+service's ``--help``, docs/parameters.md's tables (``deploy/params.py``) and the live
 ``<service>/config`` queryable's ``describe`` (:func:`describe_config`). String choices are a
 ``StrEnum`` field type, whose members compare equal to (and serialise as) plain strings.
 

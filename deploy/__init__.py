@@ -5,5 +5,5 @@ secure profile and setup scripts.
     balltrack status --run-dir runs/default    # pids, restarts, liveliness and stats
     balltrack deploy stop
     python -m balltrack.deploy.demo            # the robot chases a ball; summary and pictures
-    python -m balltrack.deploy.params --write  # the README's parameter tables
+    python -m balltrack.deploy.params --write  # docs/parameters.md's tables, README.md's key table
 """
