@@ -43,6 +43,8 @@ JITTERED = 2
 # Photo sets that their READMEs allow training on (../shared/data); the development sets are
 # never read here.
 TRAINABLE_SETS = ("train_orange_ball", "train_robocup_ball")
+# The width pictures are processed at (the detector's work_width) unless told otherwise.
+WORK_WIDTH = DetectorConfig().work_width
 # Share of the renders shown letterboxed (see augment.letterbox).
 LETTERBOXED = 0.1
 # Pictures drawn from one world before a new one is built.
@@ -115,9 +117,10 @@ def jittered(balls: list[Ball], rng: np.random.Generator) -> list[Proposal]:
 
 
 def picture_samples(image: np.ndarray, balls: list[Ball], hue_range: tuple[int, int],
-                    rng: np.random.Generator) -> Samples:
-    """The samples of one picture whose target has ``hue_range``."""
-    detector = LearnedDetector(DetectorConfig(h_min=hue_range[0], h_max=hue_range[1]), network=_NO_NETWORK)
+                    rng: np.random.Generator, work_width: int = WORK_WIDTH) -> Samples:
+    """The samples of one picture whose target has ``hue_range``, processed at ``work_width``."""
+    detector = LearnedDetector(DetectorConfig(h_min=hue_range[0], h_max=hue_range[1], work_width=work_width),
+                               network=_NO_NETWORK)
     work, scale, scale_y = detector.work_frame(image)
     if scale != 1.0:
         balls = [Ball(ball.u * scale, ball.v * scale_y, ball.radius * scale, ball.in_frame, ball.visible)
@@ -138,7 +141,8 @@ class _NoNetwork:
 _NO_NETWORK = _NoNetwork()
 
 
-def render_samples(pictures: int, seed: int, shadow_share: float = 0.25, progress=None) -> Samples:
+def render_samples(pictures: int, seed: int, shadow_share: float = 0.25, progress=None,
+                   work_width: int = WORK_WIDTH) -> Samples:
     """Samples of ``pictures`` randomised renders (a new world every PICTURES_PER_WORLD)."""
     rng = np.random.default_rng(seed)
     parts: list[Samples] = []
@@ -153,7 +157,7 @@ def render_samples(pictures: int, seed: int, shadow_share: float = 0.25, progres
             image, balls = picture.image, picture.balls
             if rng.random() < LETTERBOXED:
                 image, balls = letterbox(image, balls, rng)
-            parts.append(picture_samples(augment(image, rng), balls, picture.hue_range, rng))
+            parts.append(picture_samples(augment(image, rng), balls, picture.hue_range, rng, work_width))
             if progress is not None:
                 progress(1)
     finally:
@@ -201,7 +205,7 @@ def photo_balls(boxes: list[dict], width: int, height: int) -> list[Ball]:
     return balls
 
 
-def photo_samples(folder: Path, copies: int, seed: int, progress=None) -> Samples:
+def photo_samples(folder: Path, copies: int, seed: int, progress=None, work_width: int = WORK_WIDTH) -> Samples:
     """Samples of a trainable photo set: each photo ``copies`` times, flipped at random and with
     a fresh draw of the camera effects after the first."""
     if folder.name not in TRAINABLE_SETS:
@@ -225,7 +229,7 @@ def photo_samples(folder: Path, copies: int, seed: int, progress=None) -> Sample
                 flipped = [Ball(width - 1 - b.u, b.v, b.radius, b.in_frame, b.visible) for b in balls]
             if copy:
                 picture = augment(picture, rng)
-            parts.append(picture_samples(picture, flipped, hue_range, rng))
+            parts.append(picture_samples(picture, flipped, hue_range, rng, work_width))
         if progress is not None:
             progress(1)
     return Samples.join(parts)

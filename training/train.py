@@ -36,8 +36,8 @@ import numpy as np
 
 from balltrack.common.arguments import ArgumentParser, integer
 from balltrack.experiments.base import PHOTOS_DEFAULT_TEXT, development_photos
-from balltrack.services.detector.learned import CONTEXT, PATCH, PLANES
-from balltrack.training.data import TRAINABLE_SETS, Samples, photo_samples, render_samples
+from balltrack.services.detector.learned import CONTEXT, PATCH, PLANES, WORK_WIDTH_KEY
+from balltrack.training.data import TRAINABLE_SETS, WORK_WIDTH, Samples, photo_samples, render_samples
 
 CHUNK = 100
 MODEL_NAME = "ball_network"
@@ -60,15 +60,15 @@ def build_network():
         nn.Flatten(), nn.Linear(48 * 4 * 4, 48), nn.ReLU(inplace=True), nn.Linear(48, 4))
 
 
-def _render_chunk(arguments: tuple[int, int]) -> Samples:
-    pictures, seed = arguments
+def _render_chunk(arguments: tuple[int, int, int]) -> Samples:
+    pictures, seed, work_width = arguments
     os.environ.setdefault("MUJOCO_GL", "egl")
-    return render_samples(pictures, seed)
+    return render_samples(pictures, seed, work_width=work_width)
 
 
-def make_samples(pictures: int, seed: int, workers: int) -> Samples:
+def make_samples(pictures: int, seed: int, workers: int, work_width: int = WORK_WIDTH) -> Samples:
     """Render samples of ``pictures`` pictures in chunks (see the module doc)."""
-    chunks = [(min(CHUNK, pictures - start), seed * 100_003 + index)
+    chunks = [(min(CHUNK, pictures - start), seed * 100_003 + index, work_width)
               for index, start in enumerate(range(0, pictures, CHUNK))]
     if workers <= 1:
         return Samples.join([_render_chunk(chunk) for chunk in chunks])
@@ -141,8 +141,10 @@ def train(samples: Samples, epochs: int, seed: int, batch: int = 256, rate: floa
     return network
 
 
-def export(network, path: Path) -> None:
-    """The network as ONNX with a free batch size (opset 13: OpenCV's dnn reads it)."""
+def export(network, path: Path, work_width: int = WORK_WIDTH) -> None:
+    """The network as ONNX with a free batch size (opset 13: OpenCV's dnn reads it), and in its
+    metadata the width its pictures were processed at (``learned.WORK_WIDTH_KEY``)."""
+    import onnx
     import torch
 
     network.eval()
@@ -150,6 +152,9 @@ def export(network, path: Path) -> None:
     torch.onnx.export(network, example, str(path), input_names=["patches"], output_names=["outputs"],
                       dynamic_axes={"patches": {0: "batch"}, "outputs": {0: "batch"}}, opset_version=13,
                       dynamo=False)
+    model = onnx.load(str(path))
+    onnx.helper.set_model_props(model, {WORK_WIDTH_KEY: str(work_width)})
+    onnx.save(model, str(path))
 
 
 def model_card(settings: dict, counts: dict, check: dict, seconds: float) -> str:
@@ -210,6 +215,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--epochs", type=integer(minimum=1), default=12, help="passes over the samples (default 12)")
     parser.add_argument("--seed", type=integer(minimum=0), default=1)
     parser.add_argument("--workers", type=integer(minimum=1), default=2, help="processes that render (default 2)")
+    parser.add_argument("--work-width", type=integer(minimum=64), default=WORK_WIDTH,
+                        help=f"width pictures are processed at (default {WORK_WIDTH}); the detector then "
+                             "processes frames at most this wide with this model")
     options = parser.parse_args(argv)
     try:
         import torch
@@ -220,26 +228,27 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     photos = development_photos(options.photos)
     parts, counts = [], {}
-    samples = make_samples(options.pictures, options.seed, options.workers)
+    samples = make_samples(options.pictures, options.seed, options.workers, options.work_width)
     counts[f"renders ({options.pictures})"] = _counts(samples)
     parts.append(samples)
     for offset, name in enumerate(TRAINABLE_SETS):
         if (photos / name / "labels.json").is_file():
-            samples = photo_samples(photos / name, options.photo_copies, options.seed + offset)
+            samples = photo_samples(photos / name, options.photo_copies, options.seed + offset,
+                                    work_width=options.work_width)
             counts[f"{name} (x{options.photo_copies})"] = _counts(samples)
             parts.append(samples)
         else:
             print(f"balltrack train: {photos / name} not found; trained without it", file=sys.stderr)
     samples = Samples.join(parts)
     print(f"samples: {_counts(samples)} in {time.perf_counter() - started:.0f} s", flush=True)
-    check = make_samples(options.check_pictures, options.seed + 7919, options.workers)
+    check = make_samples(options.check_pictures, options.seed + 7919, options.workers, options.work_width)
     network = train(samples, options.epochs, options.seed)
     check_figures = figures(network, check)
     print(json.dumps(check_figures), flush=True)
     options.out.mkdir(parents=True, exist_ok=True)
-    export(network, options.out / f"{MODEL_NAME}.onnx")
+    export(network, options.out / f"{MODEL_NAME}.onnx", options.work_width)
     settings = {"pictures": options.pictures, "photo copies": options.photo_copies, "epochs": options.epochs,
-                "seed": options.seed}
+                "seed": options.seed, "work width": options.work_width}
     (options.out / f"{MODEL_NAME}.md").write_text(
         model_card(settings, counts, check_figures, time.perf_counter() - started))
     print(f"wrote {options.out / MODEL_NAME}.onnx and .md in {time.perf_counter() - started:.0f} s")

@@ -51,6 +51,9 @@ PEAK_KERNEL = np.ones((3, 3), np.uint8)
 MAX_PROPOSALS = 96
 # The pale plane is speckled (grey surfaces have pixels of every hue at low saturation).
 PALE_OPENING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+# The model's metadata key for the width its training pictures were processed at: the detector
+# shrinks wider frames to it (as to work_width), so that balls look to the network as they did.
+WORK_WIDTH_KEY = "work_width"
 # The stages ``LearnedDetector.stage_times`` adds up (seconds): steps 1, 2, 3 and 4-5 above.
 STAGES = ("colour mask", "proposals", "patches", "network")
 # Two detections are one ball when one's centre lies within this share of the larger radius of
@@ -172,8 +175,15 @@ class BallNetwork:
             options.intra_op_num_threads = options.inter_op_num_threads = 1
             self._session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
             self._input = self._session.get_inputs()[0].name
+            metadata = self._session.get_modelmeta().custom_metadata_map
         else:
             self._net = cv2.dnn.readNetFromONNX(str(path))
+            import onnxruntime
+
+            metadata = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"]
+                                                    ).get_modelmeta().custom_metadata_map
+        # The width the model's pictures were processed at (0: not recorded).
+        self.work_width = int(metadata.get(WORK_WIDTH_KEY, 0))
 
     def __call__(self, batch: np.ndarray) -> np.ndarray:
         if len(batch) == 0:
@@ -230,10 +240,12 @@ class LearnedDetector:
         self.stage_times: dict[str, float] | None = None
 
     def work_frame(self, image_bgr: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """The frame as processed (shrunk to ``work_width``) and its x and y scales."""
+        """The frame as processed (shrunk to ``work_width``, or to the model's own when that is
+        narrower) and its x and y scales."""
         image = check_image(image_bgr)
         height, width = image.shape[:2]
-        work_width = self.config.work_width
+        limits = [limit for limit in (self.config.work_width, getattr(self.network, "work_width", 0)) if limit]
+        work_width = min(limits) if limits else 0
         if not work_width or width <= work_width:
             return image, 1.0, 1.0
         size = (work_width, max(8, round(height * work_width / width)))

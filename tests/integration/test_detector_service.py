@@ -125,3 +125,18 @@ def test_survives_bad_frames_and_live_config(session, detector):
     assert publish_and_wait(session, every, frame_with_ball(POINTS[1], 4)[0], 4)["balls"] == []
     reply = query_config(session, "detector", {"min_radius": -3})
     assert not reply["ok"] and reply["error"].startswith("min_radius")
+
+
+def test_the_learned_method_finds_the_balls_and_can_be_chosen_live(session, launch):
+    launch("detector", "method=learned")
+    largest = Collector(session, "detected_ball", "Ball2D")
+    for seq, point in enumerate(POINTS[:3]):
+        payload, (u, v, radius) = frame_with_ball(point, seq)
+        ball = publish_and_wait(session, largest, payload, seq)
+        assert math.hypot(ball["u"] - u, ball["v"] - v) < 0.3 * radius + 1.0, point
+        assert abs(ball["radius_px"] - radius) < 0.25 * radius + 1.0, point
+    reply = query_config(session, "detector", {"method": "rules"})
+    assert reply["ok"] and reply["config"]["method"] == "rules"
+    payload, (u, v, radius) = frame_with_ball(POINTS[1], 10)
+    ball = publish_and_wait(session, largest, payload, 10)
+    assert math.hypot(ball["u"] - u, ball["v"] - v) < 1.5

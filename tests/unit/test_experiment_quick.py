@@ -152,10 +152,24 @@ def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     for stage in PLAIN_STAGES:
         assert figures[f"detector_speed/renders/plain_stage/{stage}/all_ms"] > 0
     assert "The same for the plain pipeline" in report
-    goals = {goal["name"]: goal for goal in results["goals"]}
-    assert set(goals) == {f"detector_speed/{name}" for name in sets}
+    # The other method (learned) in the same calls, and where its time goes.
     for name in sets:
-        assert goals[f"detector_speed/{name}"]["passed"] == (figures[f"detector_speed/{name}/ratio"] >= 2.0)
+        learned = figures[f"detector_speed/{name}/learned/wall_p50_ms"]
+        assert figures[f"detector_speed/{name}/learned/ratio"] == pytest.approx(
+            figures[f"detector_speed/{name}/plain/wall_p50_ms"] / learned, rel=1e-5)
+    from balltrack.services.detector.learned import STAGES as LEARNED_STAGES
+    for stage in LEARNED_STAGES:
+        assert figures[f"detector_speed/renders/learned_stage/{stage}/all_ms"] > 0
+    assert "Where the learned detector's time goes" in report
+    # Goals: 2x on the renders, 1.5x on each photo set.
+    goals = {goal["name"]: goal for goal in results["goals"]}
+    assert goals["detector_speed/renders"]["passed"] == (figures["detector_speed/renders/ratio"] >= 2.0)
+    photo_goals = {name for name in goals if name.startswith("detector_speed/photos/")}
+    assert set(goals) == {"detector_speed/renders"} | photo_goals
+    assert bool(photo_goals) == ("photos" in sets)
+    for name in photo_goals:
+        group = name.rsplit("/", 1)[1]
+        assert goals[name]["passed"] == (figures[f"detector_speed/photos/set/{group}/ratio"] >= 1.5)
 
 
 def test_plain_pipeline_splits_its_calls_into_mask_and_hough():
@@ -248,3 +262,20 @@ def test_photos_become_camera_frames_with_nothing_stretched(height, width):
     _, _, disc_width, disc_height = cv2.boundingRect(cv2.inRange(frame, (20, 100, 90), (60, 255, 255)))
     assert disc_width > 20
     assert abs(disc_width - disc_height) <= 2
+
+
+def test_colour_setting_scores_both_balls_with_both_methods(tmp_path):
+    assert cli.main(["colour_setting", "--frames", "4", "--out", str(tmp_path), "--no-progress"]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    figures = results["figures"]
+    for method in ("rules", "learned"):
+        for ball in ("tennis", "orange"):
+            assert 0.0 <= figures[f"colour_setting/{method}/{ball}/detection_rate"] <= 1.0
+        # a ball 0.4-3 m ahead in good light: both methods find the tennis ball with the defaults
+        assert figures[f"colour_setting/{method}/tennis/detection_rate"] >= 0.75
+    goals = {goal["name"]: goal["passed"] for goal in results["goals"]}
+    assert set(goals) == {"colour_setting/rules", "colour_setting/learned"}
+    for method in ("rules", "learned"):
+        assert goals[f"colour_setting/{method}"] == (
+            figures[f"colour_setting/{method}/orange/detection_rate"]
+            >= figures[f"colour_setting/{method}/tennis/detection_rate"] - 0.05)

@@ -9,7 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from balltrack.services.detector.learned import PATCH, PLANES, BallNetwork, Proposal
+from balltrack.services.detector.config import DetectorConfig
+from balltrack.services.detector.learned import PATCH, PLANES, BallNetwork, LearnedDetector, Proposal
 from balltrack.training import data, scenes
 from balltrack.training.augment import EFFECTS, augment
 from tests.unit.detector.drawing import scene
@@ -107,13 +108,19 @@ def test_the_exported_network_runs_in_opencv_as_in_torch(tmp_path):
 
     torch.manual_seed(0)
     network = train.build_network().eval()
-    train.export(network, tmp_path / "model.onnx")
+    train.export(network, tmp_path / "model.onnx", work_width=320)
     batch = np.random.default_rng(0).normal(size=(5, PLANES, PATCH, PATCH)).astype(np.float32)
     with torch.no_grad():
         expected = network(torch.from_numpy(batch)).numpy()
-    outputs = BallNetwork(tmp_path / "model.onnx")(batch)
     expected[:, 0] = 1 / (1 + np.exp(-expected[:, 0]))
-    assert outputs == pytest.approx(expected, abs=1e-4)
+    for runtime in BallNetwork.RUNTIMES:
+        exported = BallNetwork(tmp_path / "model.onnx", runtime=runtime)
+        assert exported(batch) == pytest.approx(expected, abs=1e-4)
+        assert exported.work_width == 320
+    # frames are processed at the model's width when the configured one is wider
+    detector = LearnedDetector(DetectorConfig(), BallNetwork(tmp_path / "model.onnx"))
+    work, scale, _ = detector.work_frame(np.zeros((480, 640, 3), np.uint8))
+    assert work.shape == (240, 320, 3) and scale == 0.5
 
 
 def test_a_short_training_learns_balls_from_not_balls():
