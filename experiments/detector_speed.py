@@ -169,8 +169,13 @@ def simulator_frames(count: int) -> list[np.ndarray]:
 
 
 def photo_paths(folder: Path) -> list[Path]:
-    """The .jpg and .png files under ``folder``, searched recursively, sorted."""
-    return sorted(path for pattern in ("*.jpg", "*.png") for path in folder.rglob(pattern))
+    """The .jpg and .png files under ``folder``, searched recursively, sorted; but those of the
+    sets the learned detector is trained on, unless ``folder`` is one (see
+    ``real_photos.photo_sets``)."""
+    from balltrack.experiments.real_photos import TRAINABLE_SETS
+
+    return sorted(path for pattern in ("*.jpg", "*.png") for path in folder.rglob(pattern)
+                  if photo_set_name(folder, path) not in TRAINABLE_SETS or folder.name in TRAINABLE_SETS)
 
 
 def named_photo_frames(folder: Path) -> list[tuple[Path, np.ndarray]]:
@@ -389,6 +394,8 @@ def method_row(result: "ExperimentResult", name: str, count: int, measured: dict
     plain = measured["plain"]["wall_p50_ms"]
     ours, theirs = measured["balltrack"]["wall_p50_ms"], measured[other]["wall_p50_ms"]
     result.figure(f"{name}/{other}/ratio", plain / theirs)
+    result.compare(f"speed against the plain pipeline: {label or name}", "1x (the paper's pipeline)",
+                   f"{method} {plain / ours:.2f}x, {other} {plain / theirs:.2f}x (wall p50, one thread)")
     return [label or name, count, f"{plain:.2f}", f"{ours:.2f}", f"{plain / ours:.2f}", f"{theirs:.2f}",
             f"{plain / theirs:.2f}"]
 

@@ -26,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from balltrack.experiments.real_photos import TRAINABLE_SETS
 from balltrack.services.detector.config import DetectorConfig
 from balltrack.services.detector.learned import PATCH, PLANES, LearnedDetector, Proposal, patches
 from balltrack.training.augment import augment, letterbox
@@ -40,9 +41,6 @@ MIN_IN_FRAME = 0.35
 # The smallest ball (radius, px) taught as one.
 MIN_BALL_RADIUS = 3.0
 JITTERED = 2
-# Photo sets that their READMEs allow training on (../shared/data); the development sets are
-# never read here.
-TRAINABLE_SETS = ("train_orange_ball", "train_robocup_ball")
 # The width pictures are processed at (the detector's work_width) unless told otherwise.
 WORK_WIDTH = DetectorConfig().work_width
 # Share of the renders shown letterboxed (see augment.letterbox).

@@ -40,6 +40,9 @@ from balltrack.services.detector.learned import CONTEXT, PATCH, PLANES, WORK_WID
 from balltrack.training.data import TRAINABLE_SETS, WORK_WIDTH, Samples, photo_samples, render_samples
 
 CHUNK = 100
+# The committed model's processing width: half the detector's work_width, for speed (the mask,
+# proposals and patches of a quarter of the pixels).
+MODEL_WORK_WIDTH = 320
 MODEL_NAME = "ball_network"
 
 
@@ -165,8 +168,8 @@ def model_card(settings: dict, counts: dict, check: dict, seconds: float) -> str
         "",
         f"- Trained: {datetime.date.today().isoformat()} on {platform.machine()}, "
         f"{os.cpu_count()} cores, in {seconds / 60:.1f} min (samples and training).",
-        f"- Input: {PLANES} planes of {PATCH} x {PATCH} px (brightness normalised per patch, saturation, "
-        f"colour mask), a square of {CONTEXT} radii around each proposal. "
+        f"- Input: {PLANES} planes of {PATCH} x {PATCH} px (brightness normalised per patch, chroma, "
+        f"colour mask, hue position in the configured range), a square of {CONTEXT} radii around each proposal. "
         "Output: ball logit; centre correction (radii); log radius ratio.",
         "- Settings: " + ", ".join(f"{key} {value}" for key, value in settings.items()) + ".",
         "",
@@ -215,8 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--epochs", type=integer(minimum=1), default=12, help="passes over the samples (default 12)")
     parser.add_argument("--seed", type=integer(minimum=0), default=1)
     parser.add_argument("--workers", type=integer(minimum=1), default=2, help="processes that render (default 2)")
-    parser.add_argument("--work-width", type=integer(minimum=64), default=WORK_WIDTH,
-                        help=f"width pictures are processed at (default {WORK_WIDTH}); the detector then "
+    parser.add_argument("--work-width", type=integer(minimum=64), default=MODEL_WORK_WIDTH,
+                        help=f"width pictures are processed at (default {MODEL_WORK_WIDTH}); the detector then "
                              "processes frames at most this wide with this model")
     options = parser.parse_args(argv)
     try:

@@ -9,9 +9,10 @@ Stages:
    circle, and the peaks of its distance transform, the centres of the largest discs that fit
    in it (touching balls, a ball beside clutter, a ball partly hidden).
 3. Patches (``patches``): a square of ``CONTEXT`` radii around each proposal, resampled to
-   ``PATCH`` x ``PATCH``, as three planes that carry no hue: brightness (normalised per patch),
-   saturation, and the colour mask. The network judges shape, shading and texture; which hue
-   counts is the mask's business.
+   ``PATCH`` x ``PATCH``, as four planes that carry no hue of their own: brightness (normalised
+   per patch), chroma, the colour mask, and where the hue lies within the configured range
+   (its middle or near an end). The network judges shape, shading and texture; which hue counts
+   is the user's setting.
 4. The network (``BallNetwork``, an ONNX model run by onnxruntime or OpenCV's dnn module) gives each patch the
    probability that a ball is centred on it and the correction of its centre and radius.
 5. Suppression: best first, a circle whose centre lies inside a kept one's is dropped.
@@ -35,7 +36,10 @@ from balltrack.services.detector.mask import ColourMasker, check_image
 # the ring beyond the rim shows whether the disc stands alone.
 PATCH = 32
 CONTEXT = 1.6
-PLANES = 3
+PLANES = 4
+# The hue plane: a hue at the middle of the configured range, and one at either end of it.
+HUE_MIDDLE = 128
+HUE_SCALE = 50
 # The committed model (written by ``balltrack train``).
 MODEL_PATH = Path(__file__).with_name("models") / "ball_network.onnx"
 # A distance-transform peak this close to the blob's bounding circle (in its radii, and in
@@ -119,16 +123,27 @@ def propose(mask: np.ndarray, min_radius: float, max_radius: float,
                      SEARCH_SCALE * float(radius)) for x, y, radius in circles]
 
 
-def feature_planes(frame_bgr: np.ndarray, chroma: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def feature_planes(frame_bgr: np.ndarray, chroma: np.ndarray, mask: np.ndarray,
+                   hue_range: tuple[int, int]) -> np.ndarray:
     """The planes patches are cut from, H x W x PLANES uint8: brightness, chroma (max - min
-    channel) and the colour mask. None of them carries a hue."""
-    return cv2.merge((cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2GRAY), chroma, mask))
+    channel), the colour mask, and where each pixel's hue lies in the configured range
+    (HUE_MIDDLE at its middle, HUE_MIDDLE -+ HUE_SCALE at its ends, clipped). None of them
+    carries a hue of its own: the last is relative to the range the user set."""
+    low, high = hue_range
+    width = (high - low) % 180 or 180
+    hue = cv2.extractChannel(cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2HSV), 0)
+    # (hue distance from the range's middle, through the wrap at 180, in half-widths of the range)
+    offset = cv2.subtract(hue, np.full_like(hue, round((low + width / 2.0) % 180)), dtype=cv2.CV_16S)
+    offset = (offset + 270) % 180 - 90
+    position = np.clip(HUE_MIDDLE + offset * (HUE_SCALE / (width / 2.0)), 0, 255).astype(np.uint8)
+    return cv2.merge((cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2GRAY), chroma, mask, position))
 
 
 def patches(features: np.ndarray, proposals: list[Proposal]) -> np.ndarray:
     """The network's input for each proposal: N x PLANES x PATCH x PATCH float32 (see the
     module's step 3): a square of CONTEXT radii around it, resampled; parts beyond the frame
-    are zero. Brightness is normalised per patch, chroma and mask scaled to 0-1."""
+    are zero. Brightness is normalised per patch, chroma and mask scaled to 0-1, the hue
+    position to -1..1 across the range."""
     cut = np.zeros((len(proposals), PATCH, PATCH, PLANES), np.uint8)
     height, width = features.shape[:2]
     for index, proposal in enumerate(proposals):
@@ -149,7 +164,8 @@ def patches(features: np.ndarray, proposals: list[Proposal]) -> np.ndarray:
     mean = brightness.mean(axis=(1, 2), keepdims=True)
     spread = brightness.std(axis=(1, 2), keepdims=True)
     out[:, 0] = (brightness - mean) / (spread + 8.0)
-    out[:, 1:] *= 1.0 / 255.0
+    out[:, 1:3] *= 1.0 / 255.0
+    out[:, 3] = (out[:, 3] - HUE_MIDDLE) / HUE_SCALE
     return out
 
 
@@ -258,7 +274,8 @@ class LearnedDetector:
         searched = planes.mask
         if planes.pale is not None:
             searched = cv2.morphologyEx(planes.mask | planes.pale, cv2.MORPH_OPEN, PALE_OPENING)
-        features = feature_planes(planes.frame, planes.chroma, planes.mask)
+        features = feature_planes(planes.frame, planes.chroma, planes.mask,
+                                  (self.config.h_min, self.config.h_max))
         started = self._lap("colour mask", started)
         max_radius = self.config.max_radius or min(work.shape[:2]) / 2.0
         proposals = propose(searched, self.config.min_radius, max_radius)

@@ -46,6 +46,10 @@ def test_a_folder_of_sets_is_every_labelled_subfolder(tmp_path):
     assert real_photos.photo_sets(tmp_path / "a_set") == [tmp_path / "a_set"]
     assert real_photos.photo_sets(tmp_path / "unlabelled") == []
     assert real_photos.photo_sets(tmp_path / "missing") == []
+    # the sets the learned detector trains on are scored only when named
+    write_set(tmp_path / "train_orange_ball", [[(200.0, 240.0, 25.0)]])
+    assert real_photos.photo_sets(tmp_path) == [tmp_path / "a_set", tmp_path / "b_set"]
+    assert real_photos.photo_sets(tmp_path / "train_orange_ball") == [tmp_path / "train_orange_ball"]
 
 
 def test_each_set_scored_by_both_detectors_with_the_goal(tmp_path):

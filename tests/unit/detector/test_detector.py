@@ -560,9 +560,10 @@ def test_scoring_rules():
     near = Detection(u=125.0, v=118.0, radius_px=20.0, score=1.0)   # within r/2 = 10 of (120, 120)
     tiny = Detection(u=304.0, v=104.0, radius_px=4.0, score=1.0)    # a small ball: not counted, not FP
     stray = Detection(u=500.0, v=400.0, radius_px=9.0, score=1.0)   # in no box: a false positive
-    assert score_image(boxes, [near, tiny, stray]) == {"labelled": 2, "found": 1, "false_positives": 1}
+    assert score_image(boxes, [near, tiny, stray]) == {"labelled": 2, "found": 1, "false_positives": 1,
+                                                       "outcomes": [[1.0, 1], [1.0, 0]]}
     far = Detection(u=138.0, v=138.0, radius_px=20.0, score=1.0)    # in the box, too far from its centre
-    assert score_image(boxes, [far]) == {"labelled": 2, "found": 0, "false_positives": 0}
+    assert score_image(boxes, [far]) == {"labelled": 2, "found": 0, "false_positives": 0, "outcomes": []}
     cut = Detection(u=5.0, v=228.0, radius_px=25.0, score=1.0)      # cut ball: radius from the long side
     assert score_image(boxes, [cut])["found"] == 1
 

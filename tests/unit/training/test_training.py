@@ -128,7 +128,11 @@ def test_a_short_training_learns_balls_from_not_balls():
     from balltrack.training import train
 
     samples = data.render_samples(40, seed=11)
-    network = train.train(samples, epochs=3, seed=0, log=lambda line: None)
+    untrained = train.figures(train.build_network(), samples)
+    network = train.train(samples, epochs=8, seed=0, log=lambda line: None)
     figures = train.figures(network, samples)
     assert figures["balls"] > 20
+    # (better than the untrained network on both, and than a coin on balls)
     assert figures["balls_accepted"] > 0.5 and figures["not_balls_rejected"] > 0.8
+    assert (figures["balls_accepted"] + figures["not_balls_rejected"]
+            > untrained["balls_accepted"] + untrained["not_balls_rejected"] + 0.2)
