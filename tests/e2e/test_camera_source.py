@@ -17,6 +17,8 @@ from balltrack.services.simulator.config import SimulatorConfig
 from balltrack.services.simulator.sim import Simulation
 from tests.harness import Collector, fully_in_view
 
+pytestmark = pytest.mark.slow
+
 FRAMES = 60
 WIDTH, HEIGHT, HFOV = 640, 480, 1.089
 

@@ -3,7 +3,11 @@ mode and reports what the demo measured; this checks the figures are a chase's, 
 
 import json
 
+import pytest
+
 from balltrack.experiments import cli
+
+pytestmark = pytest.mark.slow
 
 
 def test_latency_experiment_reports_both_follower_modes(tmp_path):
