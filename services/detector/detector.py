@@ -170,11 +170,7 @@ class BallDetector:
     def work_size(self, width: int, height: int) -> tuple[int, int] | None:
         """The (width, height) a frame of this size is shrunk to before processing; None when
         it is processed at its own size (see ``work_width``)."""
-        work_width = self.config.work_width
-        if not work_width or width <= work_width:
-            return None
-        scale = work_width / width
-        return work_width, max(8, round(height * scale))
+        return shrunk_size(width, height, self.config.work_width)
 
     def detect_judged(self, image_bgr: np.ndarray) -> tuple[DetectionResult, list[JudgedCandidate]]:
         """``detect``, and every candidate circle it judged on the way, once each (its last
@@ -354,6 +350,14 @@ class BallDetector:
                 candidate.score = judge(metrics, self.config) or 0.0
             results.extend(found)
         return results
+
+
+def shrunk_size(width: int, height: int, work_width: int) -> tuple[int, int] | None:
+    """The (width, height) a frame of this size is shrunk to for ``work_width`` (0: none), its
+    aspect kept; None when it is processed at its own size."""
+    if not work_width or width <= work_width:
+        return None
+    return work_width, max(8, round(height * work_width / width))
 
 
 def in_input_frame(candidate: Candidate, scale: float, scale_y: float) -> tuple[float, float, float]:

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from balltrack.services.detector.config import DetectorConfig
-from balltrack.services.detector.detector import Detection, DetectionResult
+from balltrack.services.detector.detector import Detection, DetectionResult, shrunk_size
 from balltrack.services.detector.mask import ColourMasker, check_image
 
 # Side (px) of the square a proposal is resampled to, and its half-side in radii of the proposal:
@@ -261,10 +261,9 @@ class LearnedDetector:
         image = check_image(image_bgr)
         height, width = image.shape[:2]
         limits = [limit for limit in (self.config.work_width, getattr(self.network, "work_width", 0)) if limit]
-        work_width = min(limits) if limits else 0
-        if not work_width or width <= work_width:
+        size = shrunk_size(width, height, min(limits) if limits else 0)
+        if size is None:
             return image, 1.0, 1.0
-        size = (work_width, max(8, round(height * work_width / width)))
         return cv2.resize(image, size, interpolation=cv2.INTER_AREA), size[0] / width, size[1] / height
 
     def proposals(self, work: np.ndarray) -> tuple[list[Proposal], np.ndarray]:
