@@ -217,6 +217,19 @@ def meets_goal(scored: dict) -> bool:
     return scored["recall"] >= GOAL_RECALL and scored["false_positives_per_image"] <= GOAL_FALSE_POSITIVES
 
 
+def learned_not_worse(both: dict) -> bool:
+    """Issue 60's rule for making the learned method the default, for one set: it finds at least
+    as many of the counted balls as the rules and makes no more false positives per image."""
+    learned, rules = both["learned"], both["rules"]
+    return (learned["found"] >= rules["found"]
+            and learned["false_positives_per_image"] <= rules["false_positives_per_image"])
+
+
+def default_choice(scores: dict[str, dict]) -> str:
+    """The method the rule picks over every set: learned only when it is not worse on each."""
+    return "learned" if scores and all(learned_not_worse(both) for both in scores.values()) else "rules"
+
+
 def fewest_found(labelled: int) -> int:
     """The fewest found balls of ``labelled`` that ``meets_goal`` passes (its recall check;
     started from the goal's share, then moved past float rounding by asking it)."""
@@ -448,11 +461,18 @@ def run(options) -> "ExperimentResult":
                           f"<= {GOAL_FALSE_POSITIVES:.2f} false positives per image (default settings)",
                     f">= {percent(GOAL_RECALL, 0)}, <= {GOAL_FALSE_POSITIVES:.2f}",
                     f"{percent(ours['recall'])}, {ours['false_positives_per_image']:.2f}", meets_goal(ours))
+        result.figure(f"{name}/learned_not_worse", learned_not_worse(both))
         result.compare(f"real photos: {name} ({ours['images']} images)", "future work",
                        "; ".join(f"{method} recall {percent(both[method]['recall'])}, "
                                  f"{both[method]['false_positives_per_image']:.2f} false positives per image, "
                                  f"AP {both[method]['average_precision']:.2f}"
                                  for method in COMPARED if both.get(method) is not None))
+    choice = default_choice(scores)
+    result.figure("default_choice", choice)
+    result.table(["set", "learned at least as good as rules (balls found, false positives per image)"],
+                 [[name, "yes" if learned_not_worse(both) else "no"] for name, both in scores.items()],
+                 f"Choice of default (issue 60: learned only when it is at least as good on every set): "
+                 f"{choice}; configured in this run: {config.method}.")
     result.table(SUMMARY_HEADERS, summary_rows(scores),
                  f"Per set, balltrack's learned detector and its rules beside the paper's plain pipeline on the "
                  f"same photos (AP: average precision over the detections' scores); the goal is the "
@@ -593,6 +613,7 @@ def main(argv: list[str] | None = None) -> int:
           f"goal of {config.method} (recall >= {GOAL_RECALL:.2f}, FP <= {GOAL_FALSE_POSITIVES:.2f}/image)")
     for name, images, balls, learned, rules, plain, spare, goal in summary_rows(scores):
         print(f"{name:<20} {images:>6} {balls:>6}  {learned:<45} {rules:<45} {plain:<45} {spare:<18} {goal}")
+    print(f"default by issue 60's rule (learned at least as good as rules on every set): {default_choice(scores)}")
     print(f"\n{'set':<20} {'balltrack: recall, 95 % interval':<34} {'FP per image, 95 % interval':<29} "
           f"resampled sets meeting the goal ({RESAMPLES}, images drawn with replacement)")
     for name, recall, false_positives, share in resampled_rows(resampled_balltrack(scores)):

@@ -68,14 +68,31 @@ def test_each_set_scored_by_both_detectors_with_the_goal(tmp_path):
     assert not real_photos.meets_goal({"recall": 1.0, "false_positives_per_image": 0.21})
 
 
+def test_learned_becomes_the_default_only_when_not_worse_on_every_set():
+    def scored(found, false_positives_per_image):
+        return {"found": found, "false_positives_per_image": false_positives_per_image}
+
+    better = {"learned": scored(10, 0.1), "rules": scored(9, 0.2)}
+    equal = {"learned": scored(9, 0.2), "rules": scored(9, 0.2)}
+    fewer_balls = {"learned": scored(8, 0.0), "rules": scored(9, 0.2)}
+    more_false_positives = {"learned": scored(10, 0.21), "rules": scored(9, 0.2)}
+    assert real_photos.learned_not_worse(better) and real_photos.learned_not_worse(equal)
+    assert not real_photos.learned_not_worse(fewer_balls)
+    assert not real_photos.learned_not_worse(more_false_positives)
+    assert real_photos.default_choice({"a": better, "b": equal}) == "learned"
+    assert real_photos.default_choice({"a": better, "b": fewer_balls}) == "rules"
+    assert real_photos.default_choice({}) == "rules"
+
+
 def test_command_line_summary_and_bad_folder(tmp_path, capsys):
     write_set(tmp_path / "drawn", [[(200.0, 240.0, 25.0)]])
     assert real_photos.main([str(tmp_path), "--summary", "--no-plain"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 5 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
+    assert len(lines) == 6 and lines[1].startswith("drawn") and lines[1].endswith("PASS")
+    assert lines[2].startswith("default by issue 60's rule") and lines[2].split()[-1] in ("learned", "rules")
     # then how the figures hold up when the set's images are drawn again (one image: always it)
-    assert lines[2] == "" and lines[3].startswith("set") and "resampled sets meeting the goal" in lines[3]
-    assert lines[4].split() == ["drawn", "1.000-1.000", "0.00-0.00", "100", "%"]
+    assert lines[3] == "" and lines[4].startswith("set") and "resampled sets meeting the goal" in lines[4]
+    assert lines[5].split() == ["drawn", "1.000-1.000", "0.00-0.00", "100", "%"]
     assert real_photos.main([str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err.strip() == f"{tmp_path / 'missing'}: no such file or folder"
     # A set's labels.json names its set; another file is refused as one.
