@@ -11,6 +11,9 @@ from dataclasses import dataclass
 CORE_SERVICES = ("detector", "locator", "follower", "simulator")
 # The camera publishes what the simulator does, from a real camera: one or the other runs.
 SERVICES = (*CORE_SERVICES, "ros2_bridge", "camera")
+# Services one process can run for several robots (``--namespaces robot1,robot2``): those that
+# handle a robot's messages. A source of frames, or the ROS 2 bridge, runs a process per robot.
+SERVICES_OF_MANY_ROBOTS = ("detector", "locator", "follower")
 # Services joined by this run in one process, on one session (``balltrack run detector+locator``).
 PROCESS_JOIN = "+"
 
