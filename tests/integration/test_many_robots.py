@@ -133,3 +133,33 @@ def test_a_robot_flooding_frames_does_not_stop_the_other(session, robots):
     finally:
         stop.set()
         flooder.join(10)
+
+
+def test_auto_serves_each_robot_whose_frame_source_appears(router, session, log_dir):
+    process = start_service(JOINED, router.endpoint, log_dir, "--namespaces", "auto",
+                            "--set", "follower.keep_target=false")
+    # Frame sources as the simulator and the camera service announce themselves: robot1's
+    # before the process starts looking (two of them: one robot all the same), robot2's after
+    # it serves robot1; robot3 has only a locator, no frames to serve.
+    sources = [session.liveliness().declare_token(Keys("robot1")(f"alive/{source}"))
+               for source in ("simulator", "camera")]
+    try:
+        for robot, source in (("robot1", None), ("robot2", "camera")):
+            if source is not None:
+                sources.append(session.liveliness().declare_token(Keys("robot3")("alive/locator")))
+                sources.append(session.liveliness().declare_token(Keys(robot)(f"alive/{source}")))
+            liveliness = Liveliness(session, robot)
+            for service in JOINED.split("+"):
+                liveliness.wait(service, timeout=60)
+            session.put(Keys(robot)("camera/camera_info"), encode("CameraInfo", camera_info(CAMERAS[robot])))
+            located = Collector(session, Keys(robot)("detected_ball_3d"), "Ball3D")
+            position = locate(session, robot, 1, located)
+            truth = math.dist(BALLS[robot], (0, 0, 0))
+            assert math.dist((position["x"], position["y"], position["z"]), BALLS[robot]) < 0.05 * truth, robot
+    finally:
+        for token in sources:
+            token.undeclare()
+        assert process.stop() == 0, process.output()
+    # Each robot once; robot3's token, seen before robot2's, served nothing.
+    assert process.output().count("serving it") == 2, process.output()
+    assert "'robot3'" not in process.output()
