@@ -4,6 +4,9 @@ its own camera model; each robot's services answer, count and change parameters 
 namespace; and a robot flooding frames does not stop the other's."""
 
 import math
+import re
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -14,7 +17,8 @@ from balltrack.common.messages import encode, header
 from balltrack.common.pinhole import Intrinsics
 from balltrack.common.status import service_status
 from balltrack.services.locator.projection import project_sphere
-from tests.harness import Collector, Liveliness, draw_ball, floor_image, put_until, query_config, start_service
+from tests.harness import (Collector, Liveliness, draw_ball, floor_image, process_environment, put_until,
+                           query_config, start_service)
 
 JOINED = "detector+locator+follower"
 ROBOTS = ("robot1", "robot2")
@@ -65,7 +69,7 @@ def locate(session, robot: str, seq: int, located: Collector, timeout: float = 6
                      timeout, 2, f"{robot}'s position of frame {seq}")[-1]
 
 
-def test_each_robot_gets_its_own_positions_and_commands(session, robots):
+def test_each_robot_gets_its_own_positions_and_commands(router, session, robots):
     located = {robot: Collector(session, Keys(robot)("detected_ball_3d"), "Ball3D") for robot in ROBOTS}
     commands = {robot: Collector(session, Keys(robot)("cmd_vel"), "Twist") for robot in ROBOTS}
     for seq, robot in enumerate(ROBOTS, start=1):
@@ -83,6 +87,13 @@ def test_each_robot_gets_its_own_positions_and_commands(session, robots):
     for robot in ROBOTS:
         alive, _ = service_status(session, robot)
         assert alive == set(JOINED.split("+")), (robot, alive)
+    # `balltrack status` shows one robot's services and says where the others are.
+    status = subprocess.run([sys.executable, "-m", "balltrack", "status", "--connect", router.endpoint,
+                             "--namespace", "robot1"], capture_output=True, text=True, timeout=60,
+                            env=process_environment())
+    assert status.returncode == 0, status.stderr
+    assert re.search(r"^locator +yes +[1-9]", status.stdout, re.M), status.stdout
+    assert "other namespaces (balltrack status --namespace NS): robot2: detector, follower, locator" in status.stdout
 
 
 def test_a_robots_parameters_change_without_the_others(session, robots):
