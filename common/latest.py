@@ -47,6 +47,8 @@ class LatestSlots(Generic[Item]):
     def put(self, source: Hashable, item: Item) -> None:
         """Keep ``item`` as ``source``'s newest, replacing one not yet taken."""
         with self._changed:
+            if self._closed:  # (a subscriber's last samples while the process stops)
+                return
             if source not in self._sources:
                 self._sources.append(source)
             _, arrived = self._full.get(source, (None, 0))

@@ -6,6 +6,9 @@ line), opens the session, declares the liveliness token ``alive/<service>``, pub
 ``{"describe": true}`` for their declarations), and stops on SIGINT/SIGTERM by setting one
 event, closing the session explicitly, exit 0.
 
+With ``--namespaces robot1,robot2`` (or ``auto``) one process serves several robots: each
+service is built once per robot, under its namespace (see ``serve``).
+
 A service module only says what it subscribes to and publishes, through the
 ``ServiceContext`` (``context.py``) its ``build`` is given::
 
