@@ -18,6 +18,7 @@ from balltrack.common import keys as key_table
 from balltrack.common.clock import SimClock, TimerTicks, WallClock, wait_out
 from balltrack.common.config import ConfigError, replace_config
 from balltrack.common.keys import Keys
+from balltrack.common.latest import LatestSlots
 from balltrack.common.messages import MessageError, decode, encode, shorten
 
 # Samples Zenoh holds for ``subscribe_latest``'s worker while it is busy (RingChannel: when
@@ -127,13 +128,16 @@ class ServiceContext:
     """What a service's ``build`` function uses: session, keys, config, stats, clock, stop."""
 
     def __init__(self, name: str, session, namespace: str, config,
-                 stop: threading.Event | None = None):
+                 stop: threading.Event | None = None, shared_worker: "SharedLatestWorker | None" = None):
         self.name = name
         self.session = session
         self.keys = Keys(namespace)
         self.stats = Stats(name)
         self.stop = stop or threading.Event()
-        self.log = logging.getLogger(name)
+        # Serving several robots, one logger each: which robot a line is about is the news.
+        self.log = logging.getLogger(self.keys(name) if shared_worker is not None else name)
+        # Serving several robots: the worker that serves every robot's ``subscribe_latest`` in turn.
+        self.shared_worker = shared_worker
         self.rejections = RateLimitedLog(self.log)
         self._config = config
         self._config_listeners: list[Callable[[Any], None]] = []
@@ -248,7 +252,13 @@ class ServiceContext:
         handed each sample to it through a ``threading.Condition``: the worker then woke
         only to wait again until that thread let go of the GIL, and served a frame ~0.2 ms
         later, see LATEST_RING.)
+
+        With a ``shared_worker`` (one process serving several robots) that worker serves this
+        robot's newest sample in turn with the other robots' instead (``SharedLatestWorker``).
         """
+        if self.shared_worker is not None:
+            self.shared_worker.subscribe(self, key, message_name, handler)
+            return
         full_key = self.keys(key)
         subscriber = self.session.declare_subscriber(full_key, zenoh.handlers.RingChannel(LATEST_RING))
         self._declared.append(subscriber)
@@ -264,12 +274,16 @@ class ServiceContext:
                 arrived = 1
                 while (newer := samples.try_recv()) is not None:
                     sample, arrived = newer, arrived + 1
-                self.stats.count("received", arrived)
-                if arrived > 1:
-                    self.stats.count("dropped", arrived - 1)
-                self.process(full_key, message_name, sample.payload.to_bytes(), handler, True)
+                self.serve_newest(full_key, message_name, sample, arrived, handler)
 
         self.start_thread(worker, f"{self.name}-{key}")
+
+    def serve_newest(self, full_key: str, message_name: str, sample, arrived: int, handler) -> None:
+        """Handle ``sample``, the newest of ``arrived`` on ``full_key``: the others are dropped."""
+        self.stats.count("received", arrived)
+        if arrived > 1:
+            self.stats.count("dropped", arrived - 1)
+        self.process(full_key, message_name, sample.payload.to_bytes(), handler, True)
 
     def start_thread(self, target: Callable[[], None], name: str) -> None:
         """A worker that must return soon after ``stop`` is set; joined before the session closes
@@ -280,7 +294,10 @@ class ServiceContext:
 
     def release_waiting(self) -> None:
         """Undeclare the subscribers whose workers wait in their ``recv`` (``subscribe_latest``):
-        the wait ends with an error, and the worker returns once done with a sample in hand."""
+        the wait ends with an error, and the worker returns once done with a sample in hand.
+        A shared worker is stopped and joined here, before any robot's entities go."""
+        if self.shared_worker is not None:
+            self.shared_worker.close()
         for subscriber in self._waited_on:
             self._declared.remove(subscriber)
             try:
@@ -345,3 +362,41 @@ class ServiceContext:
 
         loop = sim_loop if isinstance(self.clock, SimClock) else wall_loop
         self.start_thread(loop, f"{self.name}-timer")
+
+
+class SharedLatestWorker:
+    """One worker for one service's ``subscribe_latest`` in every robot a process serves
+    (``--namespaces``): each robot's subscriber keeps its newest sample in a slot of its own,
+    and the worker serves the slots in turn (``latest.LatestSlots``), counting what a robot's
+    slot dropped in that robot's stats. The newest sample per robot, as ``subscribe_latest``
+    keeps per key; its Zenoh ring cannot be used here, as a worker waits on one channel only.
+    """
+
+    def __init__(self, name: str):
+        self.name = name
+        self.slots: LatestSlots = LatestSlots()
+        # full key -> (the robot's context, message name, handler)
+        self._served: dict[str, tuple["ServiceContext", str, Callable]] = {}
+        self._thread: threading.Thread | None = None
+
+    def subscribe(self, context: "ServiceContext", key: str, message_name: str, handler: Callable) -> None:
+        full_key = context.keys(key)
+        self._served[full_key] = (context, message_name, handler)
+        self.slots.add(full_key)
+        # (on Zenoh's thread, in arrival order: it only fills the slot)
+        context.declare(context.session.declare_subscriber(
+            full_key, in_order(lambda sample: self.slots.put(full_key, sample))))
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._work, name=f"{self.name}-shared", daemon=True)
+            self._thread.start()
+
+    def _work(self) -> None:
+        while (taken := self.slots.take()) is not None:
+            context, message_name, handler = self._served[taken.source]
+            context.serve_newest(taken.source, message_name, taken.item, taken.arrived, handler)
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop serving: the worker returns once done with the sample in hand; joined."""
+        self.slots.close()
+        if self._thread is not None:
+            self._thread.join(timeout)

@@ -11,6 +11,12 @@ from dataclasses import dataclass
 CORE_SERVICES = ("detector", "locator", "follower", "simulator")
 # The camera publishes what the simulator does, from a real camera: one or the other runs.
 SERVICES = (*CORE_SERVICES, "ros2_bridge", "camera")
+# The services that publish a robot's frames (``camera/image_raw``): where one is alive, there
+# is a robot to serve (``--namespaces auto``).
+FRAME_SOURCES = ("simulator", "camera", "ros2_bridge")
+# Services one process can run for several robots (``--namespaces robot1,robot2``): those that
+# handle a robot's messages. A source of frames, or the ROS 2 bridge, runs a process per robot.
+SERVICES_OF_MANY_ROBOTS = ("detector", "locator", "follower")
 # Services joined by this run in one process, on one session (``balltrack run detector+locator``).
 PROCESS_JOIN = "+"
 
@@ -79,6 +85,14 @@ def config_key(service: str) -> str:
 
 def alive_key(service: str) -> str:
     return f"alive/{service}"
+
+
+def alive_token(full_key: str) -> tuple[str, str] | None:
+    """(namespace, service) of a ``[<namespace>/]alive/<service>`` token's key, or None."""
+    namespace, separator, service = ("/" + full_key).rpartition("/alive/")
+    if not separator or not service or "/" in service:
+        return None
+    return namespace.lstrip("/"), service
 
 
 def validate_namespace(namespace: str) -> str:

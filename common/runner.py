@@ -6,6 +6,9 @@ line), opens the session, declares the liveliness token ``alive/<service>``, pub
 ``{"describe": true}`` for their declarations), and stops on SIGINT/SIGTERM by setting one
 event, closing the session explicitly, exit 0.
 
+With ``--namespaces robot1,robot2`` (or ``auto``) one process serves several robots: each
+service is built once per robot, under its namespace (see ``serve``).
+
 A service module only says what it subscribes to and publishes, through the
 ``ServiceContext`` (``context.py``) its ``build`` is given::
 
@@ -20,17 +23,20 @@ A service module only says what it subscribes to and publishes, through the
 import argparse
 import logging
 import os
+import queue
 import sys
 import threading
 import time
 from typing import Any, Callable
 
+import zenoh
+
 from balltrack.common import keys as key_table
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
                                      settings_by_service)
-from balltrack.common.context import ServiceContext
-from balltrack.common.keys import PROCESS_JOIN, Keys
+from balltrack.common.context import ServiceContext, SharedLatestWorker
+from balltrack.common.keys import FRAME_SOURCES, PROCESS_JOIN, SERVICES_OF_MANY_ROBOTS, validate_namespace
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
                                       open_until_stopped, peer_conflict)
@@ -72,8 +78,54 @@ def build_parser(name: str, description: str | None, config_class=None) -> argpa
                             epilog=help_text(config_class) if config_class else None,
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     add_session_arguments(parser, role=name, peer=True)
+    if name in SERVICES_OF_MANY_ROBOTS:
+        add_namespaces_argument(parser)
     parser.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser
+
+
+# ``--namespaces auto``: serve each robot whose frame source is alive, as it appears.
+DISCOVER = "auto"
+
+
+def add_namespaces_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--namespaces", default=None, metavar="NS,NS,...|auto",
+                        help="serve several robots in this one process, each under its own namespace "
+                             "(robot1,robot2): each keeps its own state, parameters, stats and liveliness "
+                             "token, and one worker serves their newest frames in turn; auto: every "
+                             f"namespace where a frame source ({', '.join(FRAME_SOURCES)}) is alive, as it "
+                             f"appears (not with --namespace; services {', '.join(SERVICES_OF_MANY_ROBOTS)})")
+
+
+def robot_namespaces(args, parser: argparse.ArgumentParser, names: list[str]) -> list[str]:
+    """The namespaces this process serves: ``--namespaces``' list, else ``--namespace``'s one.
+    ValueError, one line, for a list that cannot be served."""
+    args.discover_robots = False
+    if getattr(args, "namespaces", None) is None:
+        return [validate_namespace(args.namespace)]
+    if args.namespace != parser.get_default("namespace"):
+        raise ValueError("--namespaces: not with --namespace (one robot's namespace goes in either)")
+    single = [name for name in names if name not in SERVICES_OF_MANY_ROBOTS]
+    if single:
+        raise ValueError(f"--namespaces: {', '.join(single)} serves one robot per process (run one with "
+                         f"--namespace for each); several robots in one process: "
+                         f"{', '.join(SERVICES_OF_MANY_ROBOTS)}")
+    if args.namespaces.strip() == DISCOVER:
+        args.discover_robots = True
+        return []
+    namespaces: list[str] = []
+    for item in args.namespaces.split(","):
+        try:
+            namespace = validate_namespace(item)
+        except ValueError as error:
+            raise ValueError(f"--namespaces: {error}") from None
+        if not namespace:
+            raise ValueError(f"--namespaces: {args.namespaces!r} has an empty name "
+                             "(expected NS,NS,..., e.g. robot1,robot2)")
+        if namespace in namespaces:
+            raise ValueError(f"--namespaces: {namespace!r} is listed twice")
+        namespaces.append(namespace)
+    return namespaces
 
 
 # Seconds a stopped process waits for its teardown (tokens, entities, session) before it exits
@@ -94,7 +146,7 @@ def run_service(name: str, config_class, build: Callable[[ServiceContext], Calla
     try:
         config = load_config(config_class, args.config, args.overrides, section=name)
         preflight(config)
-        Keys(args.namespace)
+        args.namespaces = robot_namespaces(args, parser, [name])
     except (ConfigError, ValueError) as error:
         print(f"{name}: {error}", file=sys.stderr)
         return 2
@@ -126,6 +178,8 @@ def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Calla
                                    + "\n\n".join(f"{name} {help_text(config_class)}" for name, config_class, _ in services),
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     add_session_arguments(parser, config_file=False, role=label, peer=True)
+    if any(name in SERVICES_OF_MANY_ROBOTS for name in names):  # (the others are named when refused)
+        add_namespaces_argument(parser)
     parser.add_argument("--config", action="append", default=[], metavar="SERVICE=FILE", dest="configs",
                         help="a service's TOML parameter file, repeatable")
     parser.add_argument("--set", action="append", default=[], metavar="SERVICE.KEY=VALUE",
@@ -154,7 +208,7 @@ def run_services(services: list[tuple[str, Any, Callable[[ServiceContext], Calla
                 preflight(configs[-1])
             except ConfigError as error:
                 raise ConfigError(f"{name}: {error}") from None
-        Keys(args.namespace)
+        args.namespaces = robot_namespaces(args, parser, names)
     except (ConfigError, ValueError) as error:
         print(f"{label}: {error}", file=sys.stderr)
         return 2
@@ -165,7 +219,12 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
     """Open the session of ``args`` and run ``services`` ((name, config, build) each) on it
     until SIGINT/SIGTERM: one process, one session, each service with its own context (stats,
     config queryable, liveliness token) as if it ran alone. ``label`` names the process in
-    its messages. Every ``loop`` a build returns runs (the last in the main thread)."""
+    its messages. Every ``loop`` a build returns runs (the last in the main thread).
+
+    With several namespaces in ``args.namespaces`` (one process serving several robots) each
+    service is built once per robot, under that robot's namespace, and is there as if it ran
+    alone: its own state, parameters, stats, config queryable and liveliness token. One worker
+    per service serves every robot's newest frame in turn (``SharedLatestWorker``)."""
     # The session opens in a thread so that SIGINT/SIGTERM while the router is still
     # unreachable ends the service at once with status 0, as when it is running.
     stop = stop_on_signals()
@@ -181,7 +240,14 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
         logging.getLogger(label).info("stopped before a router answered")
         os._exit(0)  # nothing to close; the opening thread is inside Zenoh and cannot be joined
 
-    contexts = [ServiceContext(name, session, args.namespace, config, stop) for name, config, _ in services]
+    namespaces = getattr(args, "namespaces", None) or []
+    discover = getattr(args, "discover_robots", False)
+    if not namespaces and not discover:
+        namespaces = [args.namespace]
+    shared_workers = ({name: SharedLatestWorker(name) for name, _, _ in services}
+                      if len(namespaces) > 1 or discover else {})
+    contexts: list[ServiceContext] = []
+    loops: list[tuple[ServiceContext, Callable]] = []
     status = 0
     # What a loop in a thread of its own refused (a source none of whose photos is an image):
     # it stops the process and is reported as the main thread's loop's would be.
@@ -194,18 +260,29 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
             refused.append(error)
             stop.set()
 
+    # Liveliness tokens, and what else is undeclared before the services' own entities.
     tokens = []
-    try:
-        loops = []
-        for context, (_, _, build) in zip(contexts, services):
+
+    def build_robot(namespace: str) -> None:
+        """Build and announce every service under ``namespace``: a robot's services one after
+        another, as a process of its own builds them."""
+        for name, config, build in services:
+            context = ServiceContext(name, session, namespace, config, stop, shared_workers.get(name))
+            contexts.append(context)
             loop = build(context)
             if loop is not None:
                 loops.append((context, loop))
             tokens.append(_announce(context))
+
+    try:
+        for namespace in namespaces:
+            build_robot(namespace)
         for context, loop in loops[:-1]:
             context.start_thread(lambda context=context, loop=loop: run_loop(context, loop), f"{context.name}-loop")
         if loops:
             loops[-1][1](loops[-1][0])
+        if discover:
+            _serve_discovered(session, stop, build_robot, tokens, logging.getLogger(label))
         # A timed wait keeps the main thread responsive to signals on every platform.
         while not stop.wait(0.5):
             pass
@@ -232,6 +309,33 @@ def serve(label: str, args, services: list[tuple[str, Any, Callable[[ServiceCont
     for context in contexts:
         context.log.info("stopped")
     return status
+
+
+def _serve_discovered(session, stop: threading.Event, build_robot: Callable[[str], None], tokens: list,
+                      log: logging.Logger) -> None:
+    """Until ``stop``: ``build_robot`` each namespace where a frame source (FRAME_SOURCES)
+    declares its liveliness token ``<NS>/alive/<source>``, once, in this thread
+    (``--namespaces auto``). A robot whose source goes away keeps its services: its state is
+    there for when the source comes back."""
+    found: queue.SimpleQueue = queue.SimpleQueue()
+
+    def on_token(sample) -> None:
+        token = key_table.alive_token(str(sample.key_expr))
+        if sample.kind == zenoh.SampleKind.PUT and token is not None and token[1] in FRAME_SOURCES:
+            found.put(token[0])
+
+    tokens.append(session.liveliness().declare_subscriber("**/" + key_table.alive_key("*"), on_token, history=True))
+    served: set[str] = set()
+    while not stop.is_set():
+        try:
+            # (a timed wait: the main thread stays responsive to signals)
+            namespace = found.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        if namespace not in served and not stop.is_set():
+            served.add(namespace)
+            log.info("a frame source is alive in namespace %r: serving it", namespace)
+            build_robot(namespace)
 
 
 def _close(label: str, tokens: list, contexts: list[ServiceContext], session) -> None:

@@ -2,7 +2,7 @@
 
 import threading
 
-from balltrack.common.keys import Keys
+from balltrack.common.keys import Keys, alive_key, alive_token
 from balltrack.common.messages import MessageError, decode
 
 
@@ -57,3 +57,14 @@ def service_status(session, namespace: str = "", timeout: float = 3.0,
         complete.wait(timeout + stats_wait)
     subscriber.undeclare()
     return alive, stats
+
+
+def services_by_namespace(session, timeout: float = 3.0) -> dict[str, set[str]]:
+    """The services alive in every namespace (``""``: none), from their liveliness tokens: the
+    robots one process serves (``--namespaces``) each have theirs."""
+    found: dict[str, set[str]] = {}
+    for key in liveliness_keys(session, "**/" + alive_key("*"), timeout):
+        token = alive_token(key)
+        if token is not None:
+            found.setdefault(token[0], set()).add(token[1])
+    return found

@@ -53,12 +53,8 @@ class Graph:
 
     def _tokens(self) -> list[tuple[str, str, set[str]]]:
         """(namespace, service, zids) of every ``[<namespace>/]alive/<service>`` token."""
-        found = []
-        for key, zids in self.declared["token"].items():
-            namespace, separator, service = ("/" + key).rpartition("/alive/")
-            if separator and service and "/" not in service:
-                found.append((namespace.lstrip("/"), service, zids))
-        return found
+        return [(*token, zids) for key, zids in self.declared["token"].items()
+                if (token := key_table.alive_token(key)) is not None]
 
     def names(self) -> dict[str, list[str]]:
         """Zenoh id -> the services of that session (sorted), from the ``alive/<service>``

@@ -11,7 +11,8 @@ from balltrack.common.messages import SIM_OPS
 from balltrack.common.session import (DEFAULT_PORT, ZenohConfigError, config_endpoints, router_config,
                                       secure_router_path, zenoh_reason)
 from balltrack.common.shutdown import stop_on_signals
-from balltrack.common.status import other_figures, service_status
+from balltrack.common.keys import validate_namespace
+from balltrack.common.status import other_figures, service_status, services_by_namespace
 
 
 def command_router(args) -> int:
@@ -150,6 +151,8 @@ def command_status(args) -> int:
     if session is None:
         return 1
     alive, stats = service_status(session, args.namespace, args.timeout)
+    others = {namespace: services for namespace, services in services_by_namespace(session, args.timeout).items()
+              if namespace != validate_namespace(args.namespace)}
     close_or_report(args, session)
     print(f"{'service':<12} {'alive':<6} {'received':>9} {'published':>9} {'rejected':>8} "
           f"{'dropped':>8} {'p50_ms':>7} {'p99_ms':>7} other")
@@ -159,6 +162,11 @@ def command_status(args) -> int:
                    f"{row['dropped']:>8} {row['p50_ms']:>7.2f} {row['p99_ms']:>7.2f} "
                    f"{other_figures(row)}") if row else ""
         print(f"{service:<12} {'yes' if service in alive else 'no':<6} {figures}".rstrip())
+    if others:
+        # (the robots of a fleet each have a namespace: say where they are, not just "no")
+        print("alive in other namespaces (balltrack status --namespace NS): "
+              + "; ".join(f"{namespace or '(none)'}: {', '.join(sorted(services))}"
+                          for namespace, services in sorted(others.items())))
     return 0
 
 

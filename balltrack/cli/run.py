@@ -15,7 +15,8 @@ JOINED_HELP = """``balltrack run detector+locator [options]`` runs several servi
 Zenoh session, as a ROS 2 component container does: a message from one to the other is a
 call, not a hop between processes. Settings and files then name their service: ``--set
 locator.mode=exact``, ``--config detector=detector.toml``. Not with ``--secure``, where each
-service has a certificate (a role) of its own.
+service has a certificate (a role) of its own. With ``--namespaces robot1,robot2`` (or ``auto``)
+the process serves several robots, each service built once per robot under its namespace.
 """
 
 

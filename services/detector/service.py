@@ -11,6 +11,8 @@ Example:
     balltrack run detector --connect tcp/127.0.0.1:7447 --set v_min=30 --set param2=12
 """
 
+import functools
+
 import cv2
 
 from balltrack.common import keys
@@ -41,9 +43,16 @@ def use_threads(config: DetectorConfig) -> None:
     cv2.setNumThreads(config.threads if config.threads > 0 else -1)  # (-1: OpenCV's default)
 
 
+@functools.cache
+def kernels_ready() -> float:
+    """Compile the detector's kernels once per process (one serving several robots builds a
+    detector per robot); the seconds it took."""
+    return compile_kernels()
+
+
 def build(service: ServiceContext):
     # Before the first frame (and before the service counts as alive): no frame waits for numba.
-    service.log.info("detector kernels ready in %.1f s", compile_kernels())
+    service.log.info("detector kernels ready in %.1f s", kernels_ready())
     # A frame's megabytes are not faulted in again for the next one (see common/memory.py).
     keep_freed_memory()
     largest = service.publisher(keys.DETECTED_BALL, "Ball2D")

@@ -176,6 +176,13 @@ def test_fit_colour_stops_on_sigterm_with_one_line_and_no_fit(tmp_path, log_dir)
     (["run", "detector+locator", "--config", "x.toml"], "expected SERVICE=FILE"),
     (["run", "detector+locator", "--config", "locator=missing.toml"], "missing.toml: no such config file"),
     (["run", "detector", "--config", "."], "detector: .: cannot read the config file (Is a directory)"),
+    (["run", "detector+locator", "--namespaces", "robot1,robot1"],
+     "detector+locator: --namespaces: 'robot1' is listed twice"),
+    (["run", "locator", "--namespaces", "robot1,,robot2"], "locator: --namespaces: 'robot1,,robot2' has an empty name"),
+    (["run", "follower", "--namespaces", "robot1,robot*"], "follower: --namespaces: namespace: 'robot*' may not contain"),
+    (["run", "locator", "--namespace", "robot1", "--namespaces", "robot1,robot2"], "--namespaces: not with --namespace"),
+    (["run", "locator+simulator", "--namespaces", "robot1,robot2"], "--namespaces: simulator serves one robot per process"),
+    (["run", "simulator", "--namespaces", "robot1,robot2"], "unrecognized arguments: --namespaces"),
     (["deploy", "start", "--services", "detector+locator,locator"], "a service may run once"),
     (["deploy", "start", "--secure", "secure", "--services", "detector+locator"], "each runs in a process of its own"),
 ])
