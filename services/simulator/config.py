@@ -35,6 +35,12 @@ class SimulatorConfig:
 
     scenario: str = param("chase", "a scenario name (`chase`, `orbit`, `multi`...) from "
                                    "services/simulator/scenarios/ or a path to a .toml")
+    # 0 keeps the one robot on the service's own keys, as before fleets existed; N >= 1 robots
+    # answer on `robot1/...` to `robotN/...` under the service's namespace (fleet.py).
+    robots: int = param(0, "robots in the world: 0 = one robot on the service's own keys; N = robots "
+                           "`robot1`..`robotN`, each on its own keys (`robotK/cmd_vel`, "
+                           "`robotK/camera/image_raw`, `robotK/sim/ground_truth`, `robotK/clock`...)",
+                        low=1, high=64, off=0)
     width: int = param(640, "camera image width (px)", low=16, high=4096)
     height: int = param(480, "camera image height (px)", low=16, high=4096)
     # Gazebo's default.
@@ -101,12 +107,14 @@ class SimulatorConfig:
                               f"({1.0 / self.rate_hz:.4g} s), got {self.timestep}")
 
     def preflight(self) -> None:
-        """The scenario reads and is valid (see ``common.runner.preflight``): a misspelt name
-        or a bad scenario file is refused before a router answers, not after the wait for one;
-        the simulator reads it again when it starts."""
+        """The scenario reads, is valid and holds the robots (see ``common.runner.preflight``): a
+        misspelt name or a bad scenario file is refused before a router answers, not after the
+        wait for one; the simulator reads it again when it starts."""
+        from balltrack.services.simulator.fleet import fleet_layout
         from balltrack.services.simulator.scenario import load_scenario
 
-        load_scenario(self.scenario)  # (ConfigError naming the file and the problem)
+        # (ConfigError naming the file and the problem, or the robots that do not fit in it)
+        fleet_layout(load_scenario(self.scenario), self.robots)
 
     @property
     def vfov(self) -> float:

@@ -6,7 +6,8 @@ Pure helpers (threading and arithmetic, no Zenoh), used by :mod:`services.simula
   when to start making it (:class:`WorkEstimate`: how long making one takes).
 * :class:`TimerTicks` (from common.clock): which clock values make the follower's timer fire.
 * :class:`LockstepGate`: what the frame loop waits for in ``lockstep`` pacing (the detector's
-  answer to a frame, the follower's command of a tick), fed by subscriber callbacks.
+  answer to a frame, the follower's command of a tick), fed by subscriber callbacks; one per
+  robot, and :func:`wait_together` waits for several robots' under one deadline.
 * :class:`RateMeter`: the real-time factor actually reached.
 """
 
@@ -147,6 +148,19 @@ class LockstepGate:
                 # Bounded slices: a stop from a signal handler does not notify the condition.
                 self._changed.wait(min(remaining, 0.1))
         return True
+
+
+def wait_together(waits: list[Callable[[Callable[[], float]], bool]],
+                  timeout: Callable[[], float]) -> int:
+    """Run one frame's lockstep waits of several robots (each a ``LockstepGate`` wait given its
+    timeout) one after the other under one deadline, ``timeout()`` wall seconds from the start,
+    so a frame waits at most as long with many robots as with one. Returns how many timed out."""
+    started = time.monotonic()
+    missed = 0
+    for wait in waits:
+        spent = time.monotonic() - started
+        missed += not wait(lambda spent=spent: timeout() - spent)
+    return missed
 
 
 class RateMeter:

@@ -20,6 +20,13 @@ A scenario file (every table and key is optional unless marked)::
     y = 0.0
     yaw = 0.0
 
+    [fleet]                           # where the robots start when the simulator runs
+    spacing = 1.5                     # several (robots >= 1): rows centred on [robot], facing
+    columns = 8                       # its yaw; m between neighbours, robots per row,
+    row_spacing = 3.0                 # m between rows
+    ball_distance = 0.0               # > 0: each robot gets its own tennis ball this far
+    ball_offset = 0.0                 # ahead of its centre (m), and this far to its left
+
     [light]
     diffuse = 0.8                     # main light's diffuse grey level, or [r, g, b]
     ambient = 0.4                     # scene ambient grey level, or [r, g, b]; 0 = none
@@ -171,6 +178,18 @@ class RobotStart:
 
 
 @dataclass
+class FleetSpec:
+    """How the robots stand when the simulator holds several, and whether each has its own ball
+    (services/simulator/fleet.py lays them out)."""
+
+    spacing: float = 1.5
+    columns: int = 8
+    row_spacing: float = 3.0
+    ball_distance: float = 0.0
+    ball_offset: float = 0.0
+
+
+@dataclass
 class Scenario:
     """Everything that makes up one simulated world."""
 
@@ -180,6 +199,7 @@ class Scenario:
     wall_height: float = 0.5
     floor: FloorSpec = field(default_factory=FloorSpec)
     robot: RobotStart = field(default_factory=RobotStart)
+    fleet: FleetSpec = field(default_factory=FleetSpec)
     light: LightSpec = field(default_factory=LightSpec)
     balls: list[BallSpec] = field(default_factory=list)
     distractors: list[Distractor] = field(default_factory=list)
@@ -294,6 +314,17 @@ def parse_scenario(data: dict[str, Any], source: str, default_name: str) -> Scen
     _inside(robot_table, "x", robot.x, robot.y, half - ROBOT_MARGIN)
     robot_table.finish()
 
+    fleet_table = top.table("fleet")
+    fleet = FleetSpec(
+        spacing=fleet_table.number("spacing", default=1.5, positive=True, maximum=size),
+        columns=int(fleet_table.number("columns", default=8, minimum=1, maximum=64)),
+        row_spacing=fleet_table.number("row_spacing", default=3.0, positive=True, maximum=size),
+        ball_distance=fleet_table.number("ball_distance", default=0.0, minimum=0.0, maximum=size),
+        ball_offset=fleet_table.number("ball_offset", default=0.0, minimum=-size, maximum=size))
+    if fleet_table.has("columns") and fleet.columns != fleet_table.data["columns"]:
+        fleet_table.fail(fleet_table.path("columns"), f"must be a whole number, got {fleet_table.data['columns']}")
+    fleet_table.finish()
+
     light_table = top.table("light")
     light = LightSpec(
         diffuse=light_table.colour("diffuse", default=LightSpec.diffuse, grey_allowed=True),
@@ -313,7 +344,7 @@ def parse_scenario(data: dict[str, Any], source: str, default_name: str) -> Scen
     distractors = [_parse_distractor(table, half) for table in top.tables("distractors")]
     top.finish()
     return Scenario(name=name, description=description, size=size, wall_height=wall_height,
-                    floor=floor, robot=robot, light=light, balls=balls,
+                    floor=floor, robot=robot, fleet=fleet, light=light, balls=balls,
                     distractors=distractors, source=source)
 
 

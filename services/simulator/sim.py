@@ -13,6 +13,10 @@ The service wiring drives it in a loop and does the pacing::
 
 ``handle_command`` serves the SimCommand query (reset, set_light, place_ball, place_robot).
 
+With ``robots`` >= 1 the world holds that many robots (services/simulator/fleet.py): the
+methods about one robot (commands, pose, camera, ground truth, place_robot) take its index,
+``robot=0`` to ``robot_count - 1``, 0 by default; one step moves them all.
+
 Conventions:
 
 * Camera optical frame: x right, y down, z forward (metres). Pixel coordinates follow OpenCV:
@@ -29,8 +33,8 @@ Conventions:
   bit-identical ground truth and images.
 """
 
+import dataclasses
 import functools
-import math
 import os
 import threading
 from typing import Any
@@ -40,7 +44,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 import numpy as np  # noqa: E402
 
-from balltrack.common.geometry import wrap_angle  # noqa: E402
 from balltrack.common.memory import release_freed_memory  # noqa: E402
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
 from balltrack.services.simulator.requests import (  # noqa: E402
@@ -52,21 +55,18 @@ from balltrack.services.simulator.requests import (  # noqa: E402
     robot_position,
     scenario_name,
 )
-from balltrack.services.simulator.scenario import Scenario, load_scenario  # noqa: E402
+from balltrack.services.simulator.fleet import fleet_layout, robot_names  # noqa: E402
+from balltrack.services.simulator.robot import ABSURD_ANGULAR, ABSURD_LINEAR, RobotBase  # noqa: E402, F401
+from balltrack.services.simulator.scenario import RobotStart, Scenario, load_scenario  # noqa: E402
 from balltrack.services.simulator.sim_camera import SimCamera, camera_info, project  # noqa: E402
 from balltrack.services.simulator.world import (  # noqa: E402
     LIGHT_NAME,
-    ROBOT_JOINTS,
     SPECULAR_PER_DIFFUSE,
     ball_body_name,
     build_mjcf,
     light_levels,
     physics_substeps,
 )
-
-# Commands beyond these are not "fast", they are broken (wrong units, garbage): rejected.
-ABSURD_LINEAR = 100.0
-ABSURD_ANGULAR = 100.0
 
 
 def _locked(method):
@@ -79,7 +79,8 @@ def _locked(method):
 
 
 class Simulation:
-    """One simulated world: physics, the robot's camera, scripted balls, and the SimCommands."""
+    """One simulated world: physics, the robots and their cameras, scripted balls, and the
+    SimCommands."""
 
     def __init__(self, config: SimulatorConfig, scenario: Scenario | None = None,
                  start_time: float = 0.0, start_frame: int = 0):
@@ -92,7 +93,6 @@ class Simulation:
         self._camera: SimCamera | None = None
         self._frame_index = start_frame
         self.wall_time: float | None = None
-        self.command_count = 0
         self._load(scenario if scenario is not None else load_scenario(config.scenario), start_time)
         self._restart()
 
@@ -101,9 +101,13 @@ class Simulation:
     def _load(self, scenario: Scenario, start_time: float) -> None:
         """Build model, data and renderer for ``scenario`` (the only place they are created)."""
         config = self.config
+        layout = fleet_layout(scenario, config.robots)  # ConfigError if the robots do not fit
+        # The world's scenario: the file's, with the robots' own balls if it gives them.
+        scenario = dataclasses.replace(scenario, balls=layout.balls)
         model = mujoco.MjModel.from_xml_string(build_mjcf(scenario, config))
         data = mujoco.MjData(model)
-        camera = SimCamera(model, data, config)
+        names = robot_names(config.robots)
+        camera = SimCamera(model, data, config, names)
         if self._camera is not None:
             self._camera.close()
         self.scenario = scenario
@@ -113,8 +117,8 @@ class Simulation:
         self._data.time = start_time
         self._substeps = physics_substeps(config)
         self._light_id = model.light(LIGHT_NAME).id
-        self._qpos_index = [int(model.joint(name).qposadr[0]) for name in ROBOT_JOINTS]
-        self._qvel_index = [int(model.joint(name).dofadr[0]) for name in ROBOT_JOINTS]
+        self._robots = [RobotBase(model, name, config) for name in names]
+        self._starts = layout.starts
         self._ball_mocap = [int(model.body(ball_body_name(index)).mocapid[0])
                             for index in range(len(scenario.balls))]
         self._ball_geoms = [model.geom(ball_body_name(index)).id
@@ -127,17 +131,11 @@ class Simulation:
         mujoco.mj_resetData(self._model, self._data)
         self._data.time = now
         self._motion_start = now
-        start = self.scenario.robot
-        qpos = self._data.qpos
-        qpos[self._qpos_index[0]], qpos[self._qpos_index[1]], qpos[self._qpos_index[2]] = (
-            start.x, start.y, start.yaw)
+        for robot, start in zip(self._robots, self._starts):
+            robot.restart_command()
+            robot.place(self._data, start)
         self._scripted = [ball.motion is not None for ball in self.scenario.balls]
         self._ball_positions = [tuple(ball.position) for ball in self.scenario.balls]
-        self._command_linear = 0.0
-        self._command_angular = 0.0
-        self._command_time = -math.inf
-        self._linear = 0.0
-        self._angular = 0.0
         self._apply_light(*self._default_light)
         self._rng = np.random.default_rng(self.config.seed)
         self._update_balls()
@@ -175,51 +173,48 @@ class Simulation:
     def period(self) -> float:
         return self.config.period
 
+    @property
+    def robot_count(self) -> int:
+        """How many robots the world holds (1 for ``robots = 0``)."""
+        return len(self._robots)
+
+    @property
+    def command_count(self) -> int:
+        """Commands taken so far, every robot's."""
+        return sum(robot.command_count for robot in self._robots)
+
     # -- commands -----------------------------------------------------------------------------
 
     @_locked
-    def set_command(self, linear: float, angular: float, sim_time: float | None = None) -> None:
+    def set_command(self, linear: float, angular: float, sim_time: float | None = None,
+                    robot: int = 0) -> None:
         """Command body-frame velocities (m/s, rad/s), received at simulated time ``sim_time``.
 
         Non-numbers, non-finite and absurd values raise ValueError and leave the command as it
         was; other values are clamped to max_linear / max_angular. The command holds until the
         next one, or until cmd_timeout simulated seconds pass without one (safety stop).
         """
-        linear = finite_number("linear", linear)
-        angular = finite_number("angular", angular)
-        stamp = self.time if sim_time is None else finite_number("sim_time", sim_time)
-        if abs(linear) > ABSURD_LINEAR:
-            raise ValueError(f"linear: {linear:g} m/s is not a plausible command")
-        if abs(angular) > ABSURD_ANGULAR:
-            raise ValueError(f"angular: {angular:g} rad/s is not a plausible command")
-        limit_linear = self.config.max_linear
-        limit_angular = self.config.max_angular
-        self._command_linear = min(max(linear, -limit_linear), limit_linear)
-        self._command_angular = min(max(angular, -limit_angular), limit_angular)
-        self._command_time = stamp
-        self.command_count += 1
+        self._robots[robot].set_command(linear, angular, self.time if sim_time is None else sim_time)
 
     @_locked
-    def commanded_velocity(self) -> tuple[float, float]:
+    def commanded_velocity(self, robot: int = 0) -> tuple[float, float]:
         """The (linear, angular) target now: the clamped command, or zeros after a timeout."""
-        if self._data.time - self._command_time > self.config.cmd_timeout:
-            return 0.0, 0.0
-        return self._command_linear, self._command_angular
+        return self._robots[robot].commanded_velocity(self._data.time)
 
     @_locked
-    def robot_velocity(self) -> tuple[float, float]:
+    def robot_velocity(self, robot: int = 0) -> tuple[float, float]:
         """The (linear, angular) velocity being applied, after the acceleration limits."""
-        return self._linear, self._angular
+        return self._robots[robot].linear, self._robots[robot].angular
 
     @property
     def command_time(self) -> float | None:
-        """Simulated time at which the last command was taken (None before the first)."""
-        return None if self._command_time == -math.inf else self._command_time
+        """Simulated time at which the first robot's last command was taken (None before the first)."""
+        return self._robots[0].command_time
 
     @property
     def safety_stopped(self) -> bool:
-        """True while no command arrived within cmd_timeout (the robot is told to stop)."""
-        return self._data.time - self._command_time > self.config.cmd_timeout
+        """True while no command arrived within cmd_timeout (the first robot is told to stop)."""
+        return self._robots[0].safety_stopped(self._data.time)
 
     # -- stepping -----------------------------------------------------------------------------
 
@@ -230,28 +225,14 @@ class Simulation:
         ``now_wall`` is the wall-clock time of the call, kept in ``wall_time`` for recordings.
         """
         model, data = self._model, self._data
-        config = self.config
         dt = model.opt.timestep
-        linear_step = config.max_linear_accel * dt
-        angular_step = config.max_angular_accel * dt
         limit = self.scenario.robot_limit
-        qx, qy, qyaw = self._qpos_index
-        vx, vy, _ = self._qvel_index
         for _ in range(self._substeps):
-            target_linear, target_angular = self.commanded_velocity()
-            self._linear += min(max(target_linear - self._linear, -linear_step), linear_step)
-            self._angular += min(max(target_angular - self._angular, -angular_step), angular_step)
-            yaw = data.qpos[qyaw]
-            # Body-frame command -> world-frame velocities for the planar base's actuators.
-            data.ctrl[0] = self._linear * math.cos(yaw)
-            data.ctrl[1] = self._linear * math.sin(yaw)
-            data.ctrl[2] = self._angular
+            for robot in self._robots:
+                robot.drive(data, dt)
             mujoco.mj_step(model, data)
-            # The robot never leaves the world: stop it at the edge.
-            for position_index, velocity_index in ((qx, vx), (qy, vy)):
-                if abs(data.qpos[position_index]) > limit:
-                    data.qpos[position_index] = math.copysign(limit, data.qpos[position_index])
-                    data.qvel[velocity_index] = 0.0
+            for robot in self._robots:
+                robot.keep_inside(data, limit)
         self._frame_index += 1
         self.wall_time = now_wall
         self._update_balls()
@@ -273,25 +254,28 @@ class Simulation:
         return camera_info(self.config)
 
     @_locked
-    def render(self) -> np.ndarray:
-        """The camera image now: H x W x 3 uint8, RGB (plus seeded noise if image_noise > 0)."""
-        return self._camera.render(self._rng)
+    def render(self, robot: int = 0) -> np.ndarray:
+        """The robot's camera image now: H x W x 3 uint8, RGB (plus seeded noise if
+        image_noise > 0)."""
+        return self._camera.render(self._rng, robot)
 
     @_locked
-    def render_view(self, view: str = "follow") -> np.ndarray:
+    def render_view(self, view: str = "follow", robot: int = 0) -> np.ndarray:
         """An RGB picture for people: "follow" (behind the robot), "top" (the whole world from
         above) or "front" (the robot's camera, without noise); same size as the camera image."""
-        return self._camera.render_view(view)
+        return self._camera.render_view(view, robot)
 
     @_locked
-    def ball_masks(self) -> dict[str, np.ndarray]:
-        """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
-        return self._camera.ball_masks([ball.id for ball in self.scenario.balls], self._ball_geoms)
+    def ball_masks(self, robot: int = 0) -> dict[str, np.ndarray]:
+        """Per ball id, the H x W boolean mask of its pixels the robot's camera sees
+        (segmentation rendering)."""
+        return self._camera.ball_masks([ball.id for ball in self.scenario.balls], self._ball_geoms,
+                                       robot)
 
     @_locked
-    def world_to_camera(self, point) -> np.ndarray:
-        """A world point in the camera optical frame (x right, y down, z forward)."""
-        return self._camera.world_to_camera(point)
+    def world_to_camera(self, point, robot: int = 0) -> np.ndarray:
+        """A world point in the robot's camera optical frame (x right, y down, z forward)."""
+        return self._camera.world_to_camera(point, robot)
 
     def project(self, point_in_camera) -> tuple[float, float] | None:
         """Pixel (u, v) of an optical-frame point, or None when it is not in front."""
@@ -300,23 +284,22 @@ class Simulation:
     # -- ground truth -------------------------------------------------------------------------
 
     @_locked
-    def robot_pose(self) -> tuple[float, float, float]:
-        qx, qy, qyaw = self._qpos_index
-        qpos = self._data.qpos
-        return float(qpos[qx]), float(qpos[qy]), wrap_angle(float(qpos[qyaw]))
+    def robot_pose(self, robot: int = 0) -> tuple[float, float, float]:
+        return self._robots[robot].pose(self._data)
 
     @_locked
-    def ground_truth(self) -> dict[str, Any]:
-        """The GroundTruth message body: robot pose and every ball in world and camera frames.
+    def ground_truth(self, robot: int = 0) -> dict[str, Any]:
+        """The GroundTruth message body of one robot: its pose and every ball in world and its
+        camera's frames.
 
         A ball is ``visible`` when its centre is in front of the camera and projects inside
         the image (occlusion is not considered; ``ball_masks`` gives the pixels really seen).
         """
-        x, y, yaw = self.robot_pose()
+        x, y, yaw = self.robot_pose(robot)
         width, height = self.config.width, self.config.height
         balls = []
         for ball, position in zip(self.scenario.balls, self._ball_positions):
-            in_camera = self.world_to_camera(position)
+            in_camera = self.world_to_camera(position, robot)
             pixel = self.project(in_camera)
             visible = (pixel is not None and -0.5 <= pixel[0] <= width - 0.5
                        and -0.5 <= pixel[1] <= height - 0.5)
@@ -332,15 +315,16 @@ class Simulation:
     # -- SimCommands --------------------------------------------------------------------------
 
     @_locked
-    def handle_command(self, request: Any) -> dict[str, Any]:
+    def handle_command(self, request: Any, robot: int = 0) -> dict[str, Any]:
         """Serve one SimCommand; returns {"ok": True} or {"ok": False, "error": ...}.
 
         A bad request (unknown op or argument, wrong type, out of range, unknown ball or
         scenario) changes nothing: every argument is validated before anything is applied.
+        ``place_robot`` moves robot ``robot``; the other ops change the world every robot is in.
         """
         try:
             op, arguments = checked_form(request)
-            getattr(self, op)(**arguments)
+            getattr(self, op)(**arguments, **({"robot": robot} if op == "place_robot" else {}))
         except (ValueError, TypeError, KeyError) as error:
             return {"ok": False, "error": str(error)}
         return {"ok": True}
@@ -392,13 +376,9 @@ class Simulation:
         mujoco.mj_forward(self._model, self._data)
 
     @_locked
-    def place_robot(self, x: Any = None, y: Any = None, yaw: Any = None) -> None:
+    def place_robot(self, x: Any = None, y: Any = None, yaw: Any = None, robot: int = 0) -> None:
         """Teleport the robot to (x, y) and heading yaw (default: keep), standing still."""
         new_x, new_y = robot_position(x, y, self.scenario.robot_limit)
-        new_yaw = self.robot_pose()[2] if yaw is None else finite_number("yaw", yaw)
-        qx, qy, qyaw = self._qpos_index
-        self._data.qpos[qx], self._data.qpos[qy], self._data.qpos[qyaw] = new_x, new_y, new_yaw
-        self._data.qvel[self._qvel_index] = 0.0
-        self._linear = 0.0
-        self._angular = 0.0
+        new_yaw = self.robot_pose(robot)[2] if yaw is None else finite_number("yaw", yaw)
+        self._robots[robot].place(self._data, RobotStart(x=new_x, y=new_y, yaw=new_yaw))
         mujoco.mj_forward(self._model, self._data)

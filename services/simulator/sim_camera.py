@@ -1,9 +1,11 @@
-"""The robot's camera in the simulated world (part of the simulator's pure core, see ``sim.py``):
-its MuJoCo renderer and OpenGL context, the pictures it takes (the camera image, views for
-people, the balls' segmentation), its pinhole model and the projection of points into it.
+"""The robots' cameras in the simulated world (part of the simulator's pure core, see ``sim.py``):
+their MuJoCo renderer and OpenGL context, the pictures they take (the camera image, views for
+people, the balls' segmentation), their pinhole model and the projection of points into them.
 
-``Simulation`` holds one per world and takes its lock around every call; the OpenGL (EGL)
-context is released after each render, so the next may come from any thread.
+Every robot's camera has the same size, so one renderer (one OpenGL context and scene) serves
+them all: a robot's picture is that renderer pointed at its camera. ``Simulation`` holds one
+per world and takes its lock around every call; the OpenGL (EGL) context is released after
+each render, so the next may come from any thread.
 """
 
 import math
@@ -16,7 +18,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from balltrack.services.simulator.config import SimulatorConfig  # noqa: E402
-from balltrack.services.simulator.world import CAMERA_NAME, VIEW_NAMES  # noqa: E402
+from balltrack.services.simulator.world import CAMERA_NAME, VIEW_NAMES, element_name  # noqa: E402
 
 # A ball this close to the camera plane (m) counts as not in front of it.
 MIN_VISIBLE_DEPTH = 1e-3
@@ -63,15 +65,19 @@ def project(config: SimulatorConfig, point_in_camera) -> tuple[float, float] | N
 
 
 class SimCamera:
-    """The robot's camera on one MuJoCo model and its data (see the module doc)."""
+    """The cameras of the robots named ``robots`` (services/simulator/fleet.py's names; the
+    default, the single robot) on one MuJoCo model and its data (see the module doc). Each
+    method takes the robot's index in ``robots``."""
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, config: SimulatorConfig):
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, config: SimulatorConfig,
+                 robots: list[str] = ("",)):
         self._renderer: mujoco.Renderer | None = mujoco.Renderer(model, config.height, config.width)
         release_gl_context()
         self._model = model
         self._data = data
         self._config = config
-        self._camera_id = model.camera(CAMERA_NAME).id
+        self._robots = list(robots)
+        self._camera_ids = [model.camera(element_name(robot, CAMERA_NAME)).id for robot in robots]
 
     def close(self) -> None:
         """Free the renderer (and its OpenGL context). Safe to call twice; points can still
@@ -80,10 +86,10 @@ class SimCamera:
             self._renderer.close()
             self._renderer = None
 
-    def render(self, rng: np.random.Generator) -> np.ndarray:
+    def render(self, rng: np.random.Generator, robot: int = 0) -> np.ndarray:
         """The camera image now: H x W x 3 uint8, RGB (plus noise from ``rng`` if image_noise > 0)."""
         renderer = self._live_renderer()
-        renderer.update_scene(self._data, self._camera_id)
+        renderer.update_scene(self._data, self._camera_ids[robot])
         try:
             image = renderer.render()
         finally:
@@ -93,23 +99,25 @@ class SimCamera:
             image = np.clip(image + noise, 0, 255).astype(np.uint8)
         return image
 
-    def render_view(self, view: str) -> np.ndarray:
-        """An RGB picture for people from one of VIEW_NAMES' cameras."""
+    def render_view(self, view: str, robot: int = 0) -> np.ndarray:
+        """An RGB picture for people from one of VIEW_NAMES' cameras (the robot's, or the world's
+        ``top``)."""
         if view not in VIEW_NAMES:
             raise ValueError(f"view: must be one of {', '.join(VIEW_NAMES)}, got {view!r}")
         renderer = self._live_renderer()
-        renderer.update_scene(self._data, self._model.camera(view).id)
+        camera = view if view == "top" else element_name(self._robots[robot], view)
+        renderer.update_scene(self._data, self._model.camera(camera).id)
         try:
             return renderer.render()
         finally:
             release_gl_context()
 
-    def ball_masks(self, ball_ids: list[str], ball_geoms: list[int]) -> dict[str, np.ndarray]:
+    def ball_masks(self, ball_ids: list[str], ball_geoms: list[int], robot: int = 0) -> dict[str, np.ndarray]:
         """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
         renderer = self._live_renderer()
         renderer.enable_segmentation_rendering()
         try:
-            renderer.update_scene(self._data, self._camera_id)
+            renderer.update_scene(self._data, self._camera_ids[robot])
             segmentation = renderer.render()
         finally:
             renderer.disable_segmentation_rendering()
@@ -118,10 +126,11 @@ class SimCamera:
         return {ball_id: is_geom & (segmentation[..., 0] == geom_id)
                 for ball_id, geom_id in zip(ball_ids, ball_geoms)}
 
-    def world_to_camera(self, point) -> np.ndarray:
+    def world_to_camera(self, point, robot: int = 0) -> np.ndarray:
         """A world point in the camera optical frame (x right, y down, z forward)."""
-        rotation = self._data.cam_xmat[self._camera_id].reshape(3, 3)
-        local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[self._camera_id])
+        camera_id = self._camera_ids[robot]
+        rotation = self._data.cam_xmat[camera_id].reshape(3, 3)
+        local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[camera_id])
         # MuJoCo cameras look along -z with y up; the optical frame looks along +z with y down.
         return np.array([local[0], -local[1], -local[2]])
 

@@ -23,6 +23,7 @@ import math
 from xml.sax.saxutils import quoteattr
 
 from balltrack.services.simulator.config import SimulatorConfig
+from balltrack.services.simulator.fleet import robot_names
 from balltrack.services.simulator.scenario import Scenario
 
 CAMERA_NAME = "front"
@@ -45,6 +46,17 @@ SHADOW_SIZE = 1024
 
 def ball_body_name(index: int) -> str:
     return f"ball_{index}"
+
+
+def element_name(robot: str, element: str) -> str:
+    """The model name of one robot's ``element`` (a joint, camera, actuator, geom): as it is
+    for the single robot (``robot`` ""), prefixed with the robot's name in a fleet
+    (``robot2_front``, see services/simulator/fleet.py)."""
+    return f"{robot}_{element}" if robot else element
+
+
+def robot_body_name(robot: str) -> str:
+    return robot or ROBOT_BODY
 
 
 def _vec(values) -> str:
@@ -134,31 +146,45 @@ def _balls(scenario: Scenario) -> list[str]:
     return bodies
 
 
-def _robot(config: SimulatorConfig) -> str:
+def _robot(config: SimulatorConfig, robot: str) -> str:
     fovy = camera_fovy_degrees(config)
+
+    def named(element: str) -> str:
+        return element_name(robot, element)
+
     return f"""
-    <body name="{ROBOT_BODY}" pos="0 0 0">
-      <joint name="base_x" type="slide" axis="1 0 0"/>
-      <joint name="base_y" type="slide" axis="0 1 0"/>
-      <joint name="base_yaw" type="hinge" axis="0 0 1"/>
+    <body name="{robot_body_name(robot)}" pos="0 0 0">
+      <joint name="{named('base_x')}" type="slide" axis="1 0 0"/>
+      <joint name="{named('base_y')}" type="slide" axis="0 1 0"/>
+      <joint name="{named('base_yaw')}" type="hinge" axis="0 0 1"/>
       <inertial pos="0 0 0.06" mass="{ROBOT_MASS}" diaginertia="0.01 0.01 {ROBOT_YAW_INERTIA}"/>
-      <geom name="chassis" type="box" pos="0 0 0.06" size="0.1 0.075 0.03" material="chassis"/>
-      <geom name="deck" type="box" pos="-0.01 0 0.0925" size="0.07 0.06 0.0025" material="deck"/>
-      <geom name="wheel_left" type="cylinder" fromto="0 0.078 0.035 0 0.102 0.035" size="0.035"
+      <geom name="{named('chassis')}" type="box" pos="0 0 0.06" size="0.1 0.075 0.03" material="chassis"/>
+      <geom name="{named('deck')}" type="box" pos="-0.01 0 0.0925" size="0.07 0.06 0.0025" material="deck"/>
+      <geom name="{named('wheel_left')}" type="cylinder" fromto="0 0.078 0.035 0 0.102 0.035" size="0.035"
             material="tyre"/>
-      <geom name="wheel_right" type="cylinder" fromto="0 -0.078 0.035 0 -0.102 0.035" size="0.035"
+      <geom name="{named('wheel_right')}" type="cylinder" fromto="0 -0.078 0.035 0 -0.102 0.035" size="0.035"
             material="tyre"/>
-      <geom name="caster" type="sphere" pos="-0.075 0 0.015" size="0.015" material="tyre"/>
-      <geom name="camera_housing" type="box" pos="0.092 0 0.10" size="0.012 0.025 0.012"
+      <geom name="{named('caster')}" type="sphere" pos="-0.075 0 0.015" size="0.015" material="tyre"/>
+      <geom name="{named('camera_housing')}" type="box" pos="0.092 0 0.10" size="0.012 0.025 0.012"
             material="tyre"/>
-      <camera name="{CAMERA_NAME}" pos="{_vec(CAMERA_POSITION)}" xyaxes="0 -1 0 0 0 1"
+      <camera name="{named(CAMERA_NAME)}" pos="{_vec(CAMERA_POSITION)}" xyaxes="0 -1 0 0 0 1"
               fovy="{fovy:.10g}"/>
-      <camera name="follow" mode="track" pos="-1.2 0 0.7" xyaxes="0 -1 0 0.5 0 1" fovy="50"/>
+      <camera name="{named('follow')}" mode="track" pos="-1.2 0 0.7" xyaxes="0 -1 0 0.5 0 1" fovy="50"/>
     </body>"""
 
 
+def _actuators(robot: str, translation_gain: float, yaw_gain: float) -> list[str]:
+    return [f'<velocity name="{element_name(robot, drive)}" joint="{element_name(robot, joint)}" '
+            f'kv="{gain:.6g}" ctrllimited="false" forcelimited="false"/>'
+            for drive, joint, gain in (("drive_x", "base_x", translation_gain),
+                                       ("drive_y", "base_y", translation_gain),
+                                       ("drive_yaw", "base_yaw", yaw_gain))]
+
+
 def build_mjcf(scenario: Scenario, config: SimulatorConfig) -> str:
-    """The MJCF document of ``scenario`` rendered with ``config``'s camera and light settings."""
+    """The MJCF document of ``scenario`` rendered with ``config``'s camera and light settings,
+    with config's robots (services/simulator/fleet.py: one robot named as before fleets, or
+    ``robot1`` to ``robotN``) all standing at the origin: their joints place them."""
     diffuse, ambient = light_levels(config, scenario)
     specular = tuple(SPECULAR_PER_DIFFUSE * level for level in diffuse)
     floor_texture, texture_repeat = _floor_texture(scenario)
@@ -215,18 +241,11 @@ def build_mjcf(scenario: Scenario, config: SimulatorConfig) -> str:
     top_height = half / math.tan(math.radians(22.5)) * 1.05
     lines.append(f'    <camera name="top" pos="0 0 {top_height:.6g}" xyaxes="1 0 0 0 1 0" '
                  'fovy="45"/>')
-    lines.append(_robot(config))
+    robots = robot_names(config.robots)
+    lines += [_robot(config, robot) for robot in robots]
     lines += [f"    {body}" for body in _balls(scenario)]
-    lines += [
-        '  </worldbody>',
-        '  <actuator>',
-        f'    <velocity name="drive_x" joint="base_x" kv="{robot_translation_gain:.6g}" '
-        'ctrllimited="false" forcelimited="false"/>',
-        f'    <velocity name="drive_y" joint="base_y" kv="{robot_translation_gain:.6g}" '
-        'ctrllimited="false" forcelimited="false"/>',
-        f'    <velocity name="drive_yaw" joint="base_yaw" kv="{robot_yaw_gain:.6g}" '
-        'ctrllimited="false" forcelimited="false"/>',
-        '  </actuator>',
-        '</mujoco>',
-    ]
+    lines += ['  </worldbody>', '  <actuator>']
+    lines += [f"    {actuator}" for robot in robots
+              for actuator in _actuators(robot, robot_translation_gain, robot_yaw_gain)]
+    lines += ['  </actuator>', '</mujoco>']
     return "\n".join(lines) + "\n"
