@@ -23,12 +23,22 @@ simulated-time timer fires on this clock, wait for its cmd_vel whose added ``tim
 equals this stamp; step. Each wait gives up after ``lockstep_timeout`` wall seconds (counted),
 so the same seed gives the same run.
 
+Several robots (``robots`` = N >= 1, services/simulator/fleet.py): robot K's keys are all of the
+above under ``robotK/`` (``robotK/cmd_vel``, ``robotK/camera/image_raw``, ``robotK/clock``,
+``robotK/sim/control``...; its ground truth holds its pose and every ball); every robot's frame
+k has seq k. ``robotK/sim/control``'s ``place_robot`` moves robot K, its other ops the shared
+world. In lockstep a frame waits for the detector of every robot with one alive
+(``robotK/alive/detector``) and a tick for the follower of every robot whose timer fires, all
+of one frame's waits within one ``lockstep_timeout``.
+
 Example:
     balltrack run simulator --set scenario=chase --set pacing=lockstep --set seed=3
 """
 
 import collections
+import functools
 import math
+from dataclasses import dataclass
 import threading
 import time
 from typing import Callable
@@ -42,11 +52,12 @@ from balltrack.common.images import bgr_to_message
 from balltrack.common.config import ConfigError
 from balltrack.common.memory import keep_freed_memory
 from balltrack.common.messages import MessageError, decode, encode, header, shorten
-from balltrack.common.context import ServiceContext
+from balltrack.common.context import Publisher, ServiceContext
 from balltrack.common.runner import run_service
 from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import LIVE_SETTINGS, SimulatorConfig
-from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate
+from balltrack.services.simulator.fleet import robot_key, robot_names
+from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate, wait_together
 from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
 from balltrack.services.simulator.clock_file import ClockFile
 from balltrack.services.simulator.output_files import OutputFiles
@@ -69,6 +80,36 @@ def scenario_folder(configured: str):
     return None if folder == SCENARIO_DIR.resolve() else folder
 
 
+@dataclass
+class RobotLinks:
+    """One robot's keys: what the simulator publishes for it, and the lockstep gate of the
+    pipeline that answers it (services/simulator/fleet.py names the keys)."""
+
+    index: int
+    name: str
+    images: Publisher
+    truths: Publisher
+    clocks: Publisher
+    infos: Publisher
+    gate: LockstepGate
+
+    def key(self, key: str) -> str:
+        """``key`` of this robot, under the service's namespace: ``robot2/cmd_vel``."""
+        return robot_key(self.name, key)
+
+    @classmethod
+    def declare(cls, service: ServiceContext, index: int, name: str) -> "RobotLinks":
+        # Lockstep must not lose a frame (it would wait for an answer that cannot come).
+        block = {"congestion_control": zenoh.CongestionControl.BLOCK}
+        lockstep = block if service.config.pacing == "lockstep" else {}
+        return cls(index=index, name=name,
+                   images=service.publisher(robot_key(name, keys.IMAGE_RAW), "Image", **lockstep),
+                   truths=service.publisher(robot_key(name, keys.GROUND_TRUTH), "GroundTruth", **block),
+                   clocks=service.publisher(robot_key(name, keys.CLOCK), "Clock", **block),
+                   infos=service.publisher(robot_key(name, keys.CAMERA_INFO), "CameraInfo", **block),
+                   gate=LockstepGate(service.stop))
+
+
 def build(service: ServiceContext):
     output_files = OutputFiles.from_config(service.config)
     clock_file = ClockFile(service.config.clock_file) if service.config.clock_file else None
@@ -85,20 +126,17 @@ def build(service: ServiceContext):
     simulation.render_view("front")  # the first render compiles shaders: not in frame 1's time
     # Each frame's message is a new megabyte: kept, not faulted in again (common/memory.py).
     keep_freed_memory()
-    # Lockstep must not lose a frame (it would wait for an answer that cannot come).
-    block = {"congestion_control": zenoh.CongestionControl.BLOCK}
-    images = service.publisher(keys.IMAGE_RAW, "Image",
-                               **(block if service.config.pacing == "lockstep" else {}))
-    truths = service.publisher(keys.GROUND_TRUTH, "GroundTruth", **block)
-    clocks = service.publisher(keys.CLOCK, "Clock", **block)
-    infos = service.publisher(keys.CAMERA_INFO, "CameraInfo", **block)
-    gate, meter, pacer, work = LockstepGate(service.stop), RateMeter(), RealtimePacer(), WorkEstimate()
+    links = [RobotLinks.declare(service, index, name)
+             for index, name in enumerate(robot_names(service.config.robots))]
+    meter, pacer, work = RateMeter(), RealtimePacer(), WorkEstimate()
     render_seconds, timing = collections.deque(maxlen=100), {"render_ms": 0.0}
-    alive_keys = service.keys("alive/*")
+    # (in a fleet, every robot's: robot1/alive/detector...)
+    alive_keys = service.keys(robot_key("*" if service.config.robots else "", "alive/*"))
+    links_by_name = {link.name: link for link in links}
     # Held from step to ground truth, so that no sim/control query lands between a frame's
     # image and its ground truth (the core locks each call, not the sequence).
     frame_lock = threading.Lock()
-    pending = collections.deque()  # valid cmd_vel (linear, angular), applied before a step
+    pending = collections.deque()  # valid cmd_vel (robot, linear, angular), applied before a step
 
     clock_file_error = {"reason": None}
 
@@ -117,25 +155,26 @@ def build(service: ServiceContext):
         return {"header": header(simulation.stamp_ns, simulation.frame_index),
                 **simulation.camera_info()}
 
-    def on_command(twist: dict) -> None:
+    def on_command(link: RobotLinks, twist: dict) -> None:
         linear, angular = twist["linear"][0], twist["angular"][2]  # finite: the schema checked
         if abs(linear) > ABSURD_LINEAR or abs(angular) > ABSURD_ANGULAR:
             raise MessageError(f"not a plausible command: linear {linear:g} m/s, angular "
                                f"{angular:g} rad/s")
-        pending.append((linear, angular))  # a callback never waits for a render
+        pending.append((link, linear, angular))  # a callback never waits for a render
         if isinstance(twist.get("time"), int):  # the follower's tick, awaited in lockstep
-            gate.commanded(twist["time"])
+            link.gate.commanded(twist["time"])
 
     def apply_commands() -> None:
         while pending:
+            link, linear, angular = pending.popleft()
             try:  # at the time of the last frame; the safety stop counts from there
-                simulation.set_command(*pending.popleft())
+                simulation.set_command(linear, angular, robot=link.index)
             except ValueError as error:
-                service.reject(service.keys(keys.CMD_VEL), str(error))
+                service.reject(service.keys(link.key(keys.CMD_VEL)), str(error))
 
     allowed_folder = scenario_folder(service.config.scenario)
 
-    def on_control(query) -> None:
+    def on_control(link: RobotLinks, query) -> None:
         request = None
         try:
             request = decode("SimCommand", query.payload.to_bytes() if query.payload else b"")
@@ -146,7 +185,7 @@ def build(service: ServiceContext):
             with frame_lock:
                 # The queryable outlives the loop by a moment at shutdown (the runner undeclares it).
                 reply = ({"ok": False, "error": "the simulator is stopping"} if service.stop.is_set()
-                         else simulation.handle_command(request))
+                         else simulation.handle_command(request, link.index))
         except (MessageError, ConfigError) as error:
             reply = {"ok": False, "error": str(error)}
         except Exception as error:  # e.g. RecursionError formatting a 1,000-deep argument
@@ -155,24 +194,29 @@ def build(service: ServiceContext):
             service.log.info("sim/control: %s", shorten(request, 300))
         else:
             reply["error"] = shorten(reply["error"], 300)
-            service.reject(service.keys(keys.SIM_CONTROL), reply["error"])
+            service.reject(service.keys(link.key(keys.SIM_CONTROL)), reply["error"])
         query.reply(query.key_expr, encode("SimReply", reply))
 
     def on_token(key_expr, alive: bool) -> None:
-        gate.set_alive(service.keys.strip(str(key_expr)).split("/", 1)[1], alive)
+        robot, _, peer = service.keys.strip(str(key_expr)).rpartition("alive/")
+        link = links_by_name.get(robot.rstrip("/"))
+        if link is not None:
+            link.gate.set_alive(peer, alive)
 
-    service.subscribe(keys.CMD_VEL, "Twist", on_command)
-    service.subscribe(keys.DETECTED_BALLS, "Ball2DArray",
-                      lambda balls: gate.answered(balls["header"]["seq"]), count=False)
+    for link in links:
+        service.subscribe(link.key(keys.CMD_VEL), "Twist", functools.partial(on_command, link))
+        service.subscribe(link.key(keys.DETECTED_BALLS), "Ball2DArray",
+                          lambda balls, gate=link.gate: gate.answered(balls["header"]["seq"]), count=False)
+        service.queryable(link.key(keys.CAMERA_INFO), lambda query: query.reply(
+            query.key_expr, encode("CameraInfo", camera_info())))
+        service.queryable(link.key(keys.SIM_CONTROL), functools.partial(on_control, link))
     service.live_settings = LIVE_SETTINGS
-    service.queryable(keys.CAMERA_INFO, lambda query: query.reply(
-        query.key_expr, encode("CameraInfo", camera_info())))
-    service.queryable(keys.SIM_CONTROL, on_control)
     tokens = service.session.liveliness().declare_subscriber(alive_keys, lambda sample: on_token(
         sample.key_expr, sample.kind == zenoh.SampleKind.PUT), history=True)
     service.stats.extra = lambda: {
         "real_time_factor": meter.factor(), "frames": simulation.frame_index,
-        "render_ms": timing["render_ms"], "lockstep_timeouts": gate.timeouts,
+        "render_ms": timing["render_ms"], "lockstep_timeouts": lockstep_timeouts(),
+        **({"robots": len(links)} if service.config.robots else {}),
         **({} if simulation.command_time is None
            else {"command_stamp": int(round(simulation.command_time * 1e9)),
                  "command_time": simulation.command_time})}
@@ -187,6 +231,9 @@ def build(service: ServiceContext):
     def lockstep_timeout() -> float:
         return service.config.lockstep_timeout
 
+    def lockstep_timeouts() -> int:
+        return sum(link.gate.timeouts for link in links)
+
     def frame(config: SimulatorConfig, next_info: float) -> float:
         """Step, render, pace, publish one frame; returns when the next camera_info is due."""
         if config.pacing == "realtime":
@@ -200,18 +247,18 @@ def build(service: ServiceContext):
             apply_commands()
             now = simulation.step_frame(time.time())
             head = header(simulation.stamp_ns, simulation.frame_index)
-            rgb = None
+            rgbs = [None] * len(links)
             if config.publish_images or output_files is not None:
                 started = time.perf_counter()
-                rgb = simulation.render()
+                rgbs = [simulation.render(link.index) for link in links]
                 render_seconds.append(time.perf_counter() - started)
                 timing["render_ms"] = 1000 * sum(render_seconds) / len(render_seconds)  # last 100
-            truth = simulation.ground_truth()
-            if output_files is not None:
-                output_files.write(simulation, rgb, truth)
+            truths = [simulation.ground_truth(link.index) for link in links]
+            if output_files is not None:  # (the first robot's)
+                output_files.write(simulation, rgbs[0], truths[0])
         # The frame's message is made before the wait for its delivery time, as a camera
         # converts its frame before it delivers it: none of it is on the frame's way.
-        image = image_message(rgb, head, config) if config.publish_images else None
+        images = [image_message(rgb, head, config) if config.publish_images else None for rgb in rgbs]
         work.add(time.perf_counter() - started_work)
         if config.pacing == "realtime":
             slips = pacer.slips
@@ -220,24 +267,33 @@ def build(service: ServiceContext):
             service.stats.count("dropped", pacer.slips - slips)
         else:
             pacer.reset()
-        if image is not None:
-            images.put(image)
-        truths.put({"header": head, **truth})
+        for link, image, truth in zip(links, images, truths):
+            if image is not None:
+                link.images.put(image)
+            link.truths.put({"header": head, **truth})
         if now + 1e-6 >= next_info:  # (the core sums time steps: 0.99999... is 1 s)
-            infos.put(camera_info())
+            info = camera_info()
+            for link in links:
+                link.infos.put(info)
             next_info = math.floor(now + 1e-6) + 1.0
             if clock_file is not None:
                 record_clock(now, next_info)
-        # Lockstep: time moves on once the detector has answered this frame, and, on the
-        # frames whose clock makes the follower's timer fire, once its command is applied.
+        # Lockstep: time moves on once every robot's detector has answered this frame, and, on
+        # the frames whose clock makes a robot's follower's timer fire, once its command is
+        # applied; a frame's waits share one deadline (pacing.wait_together).
         lockstep = config.pacing == "lockstep"
-        if lockstep and image is not None and gate.alive("detector"):
-            gate.wait_answer(head["seq"], lockstep_timeout)
+        if lockstep and config.publish_images:
+            wait_together([functools.partial(link.gate.wait_answer, head["seq"])
+                           for link in links if link.gate.alive("detector")], lockstep_timeout)
         if service.stop.is_set():
             return next_info
-        clocks.put({"stamp": head["stamp"]})
-        if gate.follower_fires(head["stamp"], 1 / config.lockstep_command_rate_hz) and lockstep:
-            gate.wait_command(head["stamp"], lockstep_timeout)
+        for link in links:
+            link.clocks.put({"stamp": head["stamp"]})
+        period = 1 / config.lockstep_command_rate_hz
+        firing = [link for link in links if link.gate.follower_fires(head["stamp"], period)]
+        if lockstep:
+            wait_together([functools.partial(link.gate.wait_command, head["stamp"]) for link in firing],
+                          lockstep_timeout)
         meter.add(time.monotonic(), now)
         return next_info
 
@@ -252,10 +308,10 @@ def build(service: ServiceContext):
                     next_log += 5.0
                     context.log.info("real-time factor %.3f (%.1f frames/s, render %.1f ms, "
                                      "%d lockstep timeouts)", meter.factor(),
-                                     meter.frames_per_second(), timing["render_ms"], gate.timeouts)
+                                     meter.frames_per_second(), timing["render_ms"], lockstep_timeouts())
         finally:
             context.log.info("stopped after %d frames (%.2f s simulated), %d lockstep timeouts",
-                             simulation.frame_index, simulation.time, gate.timeouts)
+                             simulation.frame_index, simulation.time, lockstep_timeouts())
             tokens.undeclare()
             with frame_lock:
                 simulation.close()
