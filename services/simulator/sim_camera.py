@@ -3,7 +3,11 @@ their MuJoCo renderer and OpenGL context, the pictures they take (the camera ima
 people, the balls' segmentation), their pinhole model and the projection of points into them.
 
 Every robot's camera has the same size, so one renderer (one OpenGL context and scene) serves
-them all: a robot's picture is that renderer pointed at its camera. ``Simulation`` holds one
+them all: a robot's picture is that renderer pointed at its camera. With several robots a
+camera's scene leaves out the robots' and balls' geoms whose bounding spheres lie outside its
+view (:meth:`SimCamera._cull`): they could not colour a pixel, and the software rasteriser pays
+for each geom drawn, so a picture costs about the same however many robots stand elsewhere.
+``Simulation`` holds one
 per world and takes its lock around every call; the OpenGL (EGL) context is released after
 each render, so the next may come from any thread.
 """
@@ -22,6 +26,9 @@ from balltrack.services.simulator.world import CAMERA_NAME, VIEW_NAMES, element_
 
 # A ball this close to the camera plane (m) counts as not in front of it.
 MIN_VISIBLE_DEPTH = 1e-3
+# The geom group a robot's camera does not draw: geoms outside its view are moved there just
+# before it renders (the model's geoms are all in group 0).
+OUT_OF_VIEW_GROUP = 5
 
 
 def release_gl_context() -> None:
@@ -78,6 +85,20 @@ class SimCamera:
         self._config = config
         self._robots = list(robots)
         self._camera_ids = [model.camera(element_name(robot, CAMERA_NAME)).id for robot in robots]
+        # Views for people draw everything; a robot's camera, with several robots, what it can see.
+        self._every_geom = mujoco.MjvOption()
+        self._every_geom.geomgroup[OUT_OF_VIEW_GROUP] = 1
+        self._in_view = mujoco.MjvOption()
+        self._in_view.geomgroup[OUT_OF_VIEW_GROUP] = 0
+        # What moves (robots, balls) may be left out; the world's own geoms (floor, walls,
+        # distractors, on body 0) are always drawn.
+        self._movable = np.flatnonzero(model.geom_bodyid != 0) if len(self._robots) > 1 else np.array([], int)
+        self._radii = model.geom_rbound[self._movable]
+        half_width = math.tan(config.hfov / 2)
+        half_height = math.tan(config.vfov / 2)
+        # Sphere-in-frustum test: a side plane is passed by more than r/cos(half angle).
+        self._half_tangents = np.array([half_width, half_height])
+        self._side_margins = np.sqrt(1 + self._half_tangents ** 2)
 
     def close(self) -> None:
         """Free the renderer (and its OpenGL context). Safe to call twice; points can still
@@ -89,7 +110,8 @@ class SimCamera:
     def render(self, rng: np.random.Generator, robot: int = 0) -> np.ndarray:
         """The camera image now: H x W x 3 uint8, RGB (plus noise from ``rng`` if image_noise > 0)."""
         renderer = self._live_renderer()
-        renderer.update_scene(self._data, self._camera_ids[robot])
+        self._cull(robot)
+        renderer.update_scene(self._data, self._camera_ids[robot], self._in_view)
         try:
             image = renderer.render()
         finally:
@@ -106,7 +128,7 @@ class SimCamera:
             raise ValueError(f"view: must be one of {', '.join(VIEW_NAMES)}, got {view!r}")
         renderer = self._live_renderer()
         camera = view if view == "top" else element_name(self._robots[robot], view)
-        renderer.update_scene(self._data, self._model.camera(camera).id)
+        renderer.update_scene(self._data, self._model.camera(camera).id, self._every_geom)
         try:
             return renderer.render()
         finally:
@@ -116,8 +138,9 @@ class SimCamera:
         """Per ball id, the H x W boolean mask of its visible pixels (segmentation rendering)."""
         renderer = self._live_renderer()
         renderer.enable_segmentation_rendering()
+        self._cull(robot)
         try:
-            renderer.update_scene(self._data, self._camera_ids[robot])
+            renderer.update_scene(self._data, self._camera_ids[robot], self._in_view)
             segmentation = renderer.render()
         finally:
             renderer.disable_segmentation_rendering()
@@ -133,6 +156,23 @@ class SimCamera:
         local = rotation.T @ (np.asarray(point, dtype=float) - self._data.cam_xpos[camera_id])
         # MuJoCo cameras look along -z with y up; the optical frame looks along +z with y down.
         return np.array([local[0], -local[1], -local[2]])
+
+    def _cull(self, robot: int) -> None:
+        """Move the movable geoms that robot ``robot``'s camera cannot see to OUT_OF_VIEW_GROUP,
+        and the others back to group 0 (their bounding spheres against its view's frustum)."""
+        if not len(self._movable):
+            return
+        camera_id = self._camera_ids[robot]
+        rotation = self._data.cam_xmat[camera_id].reshape(3, 3)
+        # MuJoCo's camera frame: x right, y up, looking along -z.
+        local = (self._data.geom_xpos[self._movable] - self._data.cam_xpos[camera_id]) @ rotation
+        depth = -local[:, 2]
+        sideways = np.abs(local[:, :2])
+        radii = self._radii
+        inside = ((depth > -radii)
+                  & np.all(sideways <= depth[:, None] * self._half_tangents
+                           + radii[:, None] * self._side_margins, axis=1))
+        self._model.geom_group[self._movable] = np.where(inside, 0, OUT_OF_VIEW_GROUP)
 
     def _live_renderer(self) -> mujoco.Renderer:
         if self._renderer is None:

@@ -200,6 +200,22 @@ def test_each_camera_renders_its_own_view_with_its_own_ball_nearest(fleet):
     assert fleet.render_view("follow", robot=1).shape == (120, 160, 3)
 
 
+def test_leaving_out_what_a_camera_cannot_see_changes_no_pixel():
+    """A robot's camera draws only the robots and balls in its view (sim_camera's culling); its
+    picture is the same as the one drawn with every geom (the ``front`` view for people)."""
+    with Simulation(SimulatorConfig(scenario="fleet", robots=12, **SMALL)) as simulation:
+        for robot in range(12):  # turning on the spot and driving: each sees others' parts
+            simulation.set_command(0.3 * (robot % 2), 1.5 if robot < 6 else -1.5, robot=robot)
+        balls_seen = 0
+        for frame in range(45):
+            simulation.step_frame()
+            if frame % 15 == 14:
+                for robot in range(12):
+                    assert np.array_equal(simulation.render(robot), simulation.render_view("front", robot)), robot
+                    balls_seen = max(balls_seen, sum(mask.any() for mask in simulation.ball_masks(robot).values()))
+        assert balls_seen >= 2, "no camera saw another robot's ball: the pictures tested little"
+
+
 def test_in_the_fleet_scenario_every_robot_reaches_its_own_ball():
     """Each robot steered towards its own ball by its ground truth (as a perfect follower
     would) reaches it under its own referee, and only its own: the layout leaves each robot a
