@@ -38,9 +38,9 @@ Example:
 import collections
 import functools
 import math
-from dataclasses import dataclass
 import threading
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 import cv2

@@ -568,7 +568,10 @@ def test_recorder_writes_video_and_ground_truth(tmp_path):
 
 
 @pytest.mark.parametrize("arguments, reason", [(["--frames", "0"], "--frames: must be at least 1"),
-                                               (["--set", "nonsense=1"], "nonsense: unknown parameter")])
+                                               (["--set", "nonsense=1"], "nonsense: unknown parameter"),
+                                               (["--robots", "1", "65"], "--robots: must be at most 64"),
+                                               (["--robots", "16"], "robots: 16 in scenario 'chase': robot 1 "
+                                                                    "would start at")])
 def test_benchmark_rejects_bad_arguments_with_one_line(arguments, reason, capsys):
     from balltrack.services.simulator.benchmark import main
 

@@ -268,3 +268,15 @@ def test_a_frames_waits_for_several_robots_share_one_deadline():
     # of it within one timeout, not one per robot.
     assert missed == 2 and silent.timeouts == 2 and answering.timeouts == 0 and gone.timeouts == 0
     assert 0.5 <= elapsed < 0.9
+
+
+# -- the benchmark -----------------------------------------------------------------------------
+
+def test_the_benchmark_measures_each_robot_count_in_turn(capsys):
+    from balltrack.services.simulator.benchmark import main
+
+    assert main(["--frames", "2", "--set", "scenario=fleet", "--set", "width=64", "--set", "height=48",
+                 "--robots", "0", "3"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in lines] == ["64x48 shadows=False robots=0", "64x48 shadows=False robots=3"]
+    assert all("ms CPU/frame" in line for line in lines)
