@@ -25,8 +25,8 @@ so the same seed gives the same run.
 
 Several robots (``robots`` = N >= 1, services/simulator/fleet.py): robot K's keys are all of the
 above under ``robotK/`` (``robotK/cmd_vel``, ``robotK/camera/image_raw``, ``robotK/clock``,
-``robotK/sim/control``...; its ground truth holds its pose and every ball); every robot's frame
-k has seq k. ``robotK/sim/control``'s ``place_robot`` moves robot K, its other ops the shared
+``robotK/sim/control``, the liveliness token ``robotK/alive/simulator``...; its ground truth
+holds its pose and every ball); every robot's frame k has seq k. ``robotK/sim/control``'s ``place_robot`` moves robot K, its other ops the shared
 world. In lockstep a frame waits for the detector of every robot with one alive
 (``robotK/alive/detector``) and a tick for the follower of every robot whose timer fires, all
 of one frame's waits within one ``lockstep_timeout``.
@@ -128,6 +128,12 @@ def build(service: ServiceContext):
     keep_freed_memory()
     links = [RobotLinks.declare(service, index, name)
              for index, name in enumerate(robot_names(service.config.robots))]
+    if service.config.robots:
+        # Each robot's namespace has its frame source alive, as a robot with its own camera
+        # would: how a process serving many robots finds them (`--namespaces auto`).
+        for link in links:
+            service.declare(service.session.liveliness().declare_token(
+                service.keys(link.key(keys.alive_key(service.name)))))
     meter, pacer, work = RateMeter(), RealtimePacer(), WorkEstimate()
     render_seconds, timing = collections.deque(maxlen=100), {"render_ms": 0.0}
     # (in a fleet, every robot's: robot1/alive/detector...)

@@ -43,6 +43,8 @@ def fleet_simulator(router, session, log_dir):
                             "--set", "scenario=fleet", "--set", f"robots={len(ROBOTS)}",
                             "--set", "pacing=realtime")
     Liveliness(session, NAMESPACE).wait("simulator", timeout=40)
+    for robot in ROBOTS:  # each robot's namespace shows its frame source alive
+        Liveliness(session, f"{NAMESPACE}/{robot}").wait("simulator", timeout=10)
     yield collectors, unprefixed
     assert process.stop() == 0, process.output()
 
