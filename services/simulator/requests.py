@@ -1,9 +1,18 @@
 """SimCommand requests checked before the simulation changes: a request from the network
-(``sim/control``) is either wholly valid or refused with a one-line reason, never half applied.
-Pure functions, no MuJoCo: :class:`sim.Simulation` applies what they return."""
+(``sim/control``) is either wholly valid or refused with a one-line reason, never half applied,
+and a reset names only a scenario file it may load (:func:`requested_scenario`). Pure
+functions, no MuJoCo: :class:`sim.Simulation` applies what they return."""
 
 import math
+import os
+import re
+import stat
+from pathlib import Path
 from typing import Any
+
+from balltrack.common.config import ConfigError
+from balltrack.common.messages import shorten
+from balltrack.services.simulator.scenario import SCENARIO_DIR, available_scenarios
 
 # Each op and the arguments it takes (all optional in the request: an op says what it needs).
 COMMAND_ARGUMENTS = {"reset": {"scenario"}, "set_light": {"diffuse", "ambient"},
@@ -11,6 +20,9 @@ COMMAND_ARGUMENTS = {"reset": {"scenario"}, "set_light": {"diffuse", "ambient"},
 COMMAND_OPS = tuple(COMMAND_ARGUMENTS)
 # The height range (m) a placed ball's centre may be given.
 MAX_BALL_HEIGHT = 10.0
+
+# What a network request may name: a file stem, no path (see requested_scenario).
+SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
 def finite_number(name: str, value: Any) -> float:
@@ -132,3 +144,35 @@ def robot_position(x: Any, y: Any, limit: float) -> tuple[float, float]:
         raise ValueError(f"x, y: ({new_x:g}, {new_y:g}) is outside the world "
                          f"(|x|, |y| must be <= {limit:g})")
     return new_x, new_y
+
+
+def requested_scenario(name: Any, folder: str | Path | None = None) -> Path:
+    """The scenario file a network request (``sim/control`` reset) may load: a name, looked up
+    among the shipped scenarios and then in ``folder`` (the folder of the scenario file the
+    simulator was started with, if any), or the absolute path of a ``.toml`` file in ``folder``.
+    A peer must not make the simulator read files of its choosing (``../../etc/hostname``,
+    ``/dev/zero``): anything else, and anything that is not a regular file whose real location
+    is one of those folders, is refused with ConfigError."""
+    if not isinstance(name, str):
+        raise ConfigError(f"scenario: expected a scenario name, got {type(name).__name__}")
+    text = name.strip()
+    folders = [SCENARIO_DIR.resolve()] + ([Path(folder).resolve()] if folder is not None else [])
+    if "/" in text or "\\" in text:
+        candidates = [Path(text)] if len(text) <= 4096 and Path(text).is_absolute() else []
+        folders = folders[1:]  # a path names a file in the configured folder, never elsewhere
+    else:
+        candidates = [candidate_folder / (text if text.endswith(".toml") else f"{text}.toml")
+                      for candidate_folder in folders]
+    for candidate in candidates:
+        if not (SCENARIO_NAME.fullmatch(candidate.stem) and candidate.suffix == ".toml"):
+            break
+        try:
+            real = candidate.resolve(strict=True)
+            if real.parent in folders and stat.S_ISREG(os.stat(real).st_mode):
+                return real
+        except (OSError, RuntimeError):  # missing, name too long, symlink loop
+            continue
+    known = ", ".join(available_scenarios())
+    where = f"; or a .toml file in {folder}" if folder is not None else ""
+    raise ConfigError(f"scenario: {shorten(repr(name), 80)} is not a scenario that may be loaded "
+                      f"over the network (shipped: {known}{where})")

@@ -58,7 +58,6 @@ A problem (missing file, bad TOML, unknown key, wrong type, out-of-range value) 
 
 import math
 import os
-import re
 import stat
 import tomllib
 from dataclasses import dataclass, field
@@ -86,8 +85,6 @@ SHAPES = ("box", "cylinder", "sphere")
 ROBOT_MARGIN = 0.2
 # A scenario file is a few hundred bytes; anything far larger is not one (or is /dev/zero).
 MAX_SCENARIO_BYTES = 1 << 20
-# What a network request may name: a file stem, no path (see requested_scenario).
-SCENARIO_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -359,38 +356,6 @@ def scenario_path(name_or_path: str) -> Path:
     if text.endswith(".toml") or "/" in text or "\\" in text:
         return Path(text)
     return SCENARIO_DIR / f"{text}.toml"
-
-
-def requested_scenario(name: Any, folder: str | Path | None = None) -> Path:
-    """The scenario file a network request (``sim/control`` reset) may load: a name, looked up
-    among the shipped scenarios and then in ``folder`` (the folder of the scenario file the
-    simulator was started with, if any), or the absolute path of a ``.toml`` file in ``folder``.
-    A peer must not make the simulator read files of its choosing (``../../etc/hostname``,
-    ``/dev/zero``): anything else, and anything that is not a regular file whose real location
-    is one of those folders, is refused with ConfigError."""
-    if not isinstance(name, str):
-        raise ConfigError(f"scenario: expected a scenario name, got {type(name).__name__}")
-    text = name.strip()
-    folders = [SCENARIO_DIR.resolve()] + ([Path(folder).resolve()] if folder is not None else [])
-    if "/" in text or "\\" in text:
-        candidates = [Path(text)] if len(text) <= 4096 and Path(text).is_absolute() else []
-        folders = folders[1:]  # a path names a file in the configured folder, never elsewhere
-    else:
-        candidates = [candidate_folder / (text if text.endswith(".toml") else f"{text}.toml")
-                      for candidate_folder in folders]
-    for candidate in candidates:
-        if not (SCENARIO_NAME.fullmatch(candidate.stem) and candidate.suffix == ".toml"):
-            break
-        try:
-            real = candidate.resolve(strict=True)
-            if real.parent in folders and stat.S_ISREG(os.stat(real).st_mode):
-                return real
-        except (OSError, RuntimeError):  # missing, name too long, symlink loop
-            continue
-    known = ", ".join(available_scenarios())
-    where = f"; or a .toml file in {folder}" if folder is not None else ""
-    raise ConfigError(f"scenario: {shorten(repr(name), 80)} is not a scenario that may be loaded "
-                      f"over the network (shipped: {known}{where})")
 
 
 def load_scenario(name_or_path: str) -> Scenario:

@@ -58,7 +58,8 @@ from balltrack.common.status import liveliness_keys
 from balltrack.services.simulator.config import LIVE_SETTINGS, SimulatorConfig
 from balltrack.services.simulator.fleet import robot_key, robot_names
 from balltrack.services.simulator.pacing import LockstepGate, RateMeter, RealtimePacer, WorkEstimate, wait_together
-from balltrack.services.simulator.scenario import SCENARIO_DIR, requested_scenario, scenario_path
+from balltrack.services.simulator.requests import requested_scenario
+from balltrack.services.simulator.scenario import SCENARIO_DIR, scenario_path
 from balltrack.services.simulator.clock_file import ClockFile
 from balltrack.services.simulator.output_files import OutputFiles
 from balltrack.services.simulator.sim import ABSURD_ANGULAR, ABSURD_LINEAR, Simulation
