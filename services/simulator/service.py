@@ -205,10 +205,10 @@ def build(service: ServiceContext):
         query.reply(query.key_expr, encode("SimReply", reply))
 
     def on_token(key_expr, alive: bool) -> None:
-        robot, _, peer = service.keys.strip(str(key_expr)).rpartition("alive/")
-        link = links_by_name.get(robot.rstrip("/"))
+        token = keys.alive_token(service.keys.strip(str(key_expr)))  # (robot, peer)
+        link = links_by_name.get(token[0]) if token is not None else None
         if link is not None:
-            link.gate.set_alive(peer, alive)
+            link.gate.set_alive(token[1], alive)
 
     for link in links:
         service.subscribe(link.key(keys.CMD_VEL), "Twist", functools.partial(on_command, link))
