@@ -7,9 +7,9 @@ them all: a robot's picture is that renderer pointed at its camera. With several
 camera's scene leaves out the robots' and balls' geoms whose bounding spheres lie outside its
 view (:meth:`SimCamera._cull`): they could not colour a pixel, and the software rasteriser pays
 for each geom drawn, so a picture costs about the same however many robots stand elsewhere.
-``Simulation`` holds one
-per world and takes its lock around every call; the OpenGL (EGL) context is released after
-each render, so the next may come from any thread.
+
+``Simulation`` holds one per world and takes its lock around every call; the OpenGL (EGL)
+context is released after each render, so the next may come from any thread.
 """
 
 import math
