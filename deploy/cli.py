@@ -166,7 +166,8 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
                 secure_client_path(secure, role, Keys(namespace).namespace)
         except ValueError as error:
             raise LaunchError(str(error)) from None
-        zenoh_config = str(secure_client_path(absolute(secure), "viewer"))  # for wait_alive and status
+        # for wait_alive and status (a robot's own viewer in a fleet's profile)
+        zenoh_config = str(secure_client_path(absolute(secure), "viewer", Keys(namespace).namespace))
     specs: list[ChildSpec] = []
     if router:
         argv = [python, "-m", "balltrack", "router"]

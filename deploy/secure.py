@@ -19,11 +19,12 @@ camera frame and may publish ``cmd_vel``. The profile uses Zenoh's own mechanism
   router passes everything, on router-to-router links only (see :func:`access_control`).
 
 A fleet (``--robots robot1,robot2``): each robot's namespace is its name, and each robot has
-credentials of its own for every service role (:data:`ROBOT_ROLES`), subject ``<role>@<robot>``,
-allowed the role's keys under ``<robot>/`` only: robot1's follower cannot put ``robot2/cmd_vel``
-nor its detector read robot2's frames. The fleet-wide roles (:data:`FLEET_ROLES`: viewer,
-operator, and the services one process may run for several robots) get the same rules for
-every robot's namespace, and the watchers every robot's liveliness tokens (``**/alive/*``).
+credentials of its own for every service role and a viewer (:data:`ROBOT_ROLES`), subject
+``<role>@<robot>``, allowed the role's keys under ``<robot>/`` only (no admin space): robot1's
+follower cannot put ``robot2/cmd_vel`` nor its detector read robot2's frames. The fleet-wide
+roles (:data:`FLEET_ROLES`: viewer, operator, and the services one process may run for several
+robots) get the same rules for every robot's namespace, and the watchers every robot's
+liveliness tokens (``**/alive/*``).
 
 Every process is a Zenoh client of a router: peers would mesh directly, around the routers'
 access control. What each role may do is :data:`ROLES` plus the key table
@@ -124,9 +125,10 @@ ROLES: dict[str, Role] = {
 
 # In a fleet's profile (--robots): the roles that see the whole fleet (a person watching or
 # driving, a process serving several robots: `balltrack run locator --namespaces ...`), and the
-# roles each robot has of its own. A frame source runs per robot, so it has no fleet-wide role.
+# roles each robot has of its own: its services, and a viewer of it alone (`deploy start` on the
+# robot watches its services with it). A frame source runs per robot: no fleet-wide one.
 FLEET_ROLES = tuple(role for role in ROLES if role in SERVICES_OF_MANY_ROBOTS or role not in SERVICES)
-ROBOT_ROLES = tuple(role for role in ROLES if role in SERVICES)
+ROBOT_ROLES = tuple(role for role in ROLES if role in SERVICES or role == "viewer")
 
 
 @dataclass(frozen=True)
@@ -212,9 +214,10 @@ def access_control(namespace: str = "", hosts: list[str] = (), robots: list[str]
         fleet_watch = bool(robots and not identity.robot)
 
         def add(kind: str, messages: list[str], flows: list[str], key_list, namespaced: bool = True) -> None:
-            # (the admin space has no namespace)
+            # The admin space has no namespace: it shows the whole router (every robot's keys),
+            # so a robot's own roles get none of it.
             names = [keys(key) if namespaced and not key.startswith("@/") else key
-                     for keys in spaces for key in key_list]
+                     for keys in spaces for key in key_list if not (identity.robot and key.startswith("@/"))]
             if names:
                 role_rules.append(_rule(f"{identity.name} {kind}", messages, flows, list(dict.fromkeys(names))))
 

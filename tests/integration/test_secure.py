@@ -7,9 +7,9 @@ authenticate while opening the session: ``zenoh.open`` keeps retrying the link u
 connect timeout, then raises "Unable to connect to any of [...]" (our SessionOpenError). A
 client that authenticates but matches no role (a password under another role's certificate)
 opens, and every message to or from it is dropped. Frames are small (160x120) to keep the CPU low.
+Tests marked FLEET run over a fleet's profile (``--robots robot1,robot2``).
 """
 
-import contextlib
 import json
 import shutil
 import subprocess
@@ -34,31 +34,31 @@ REFUSED_OPEN_TIMEOUT = 3.0
 
 
 @pytest.fixture(scope="module")
-def profile(tmp_path_factory):
+def profile(tmp_path_factory, request):
+    """A one-host profile; a fleet's, of the robots given as the indirect parameter (``FLEET``)."""
     directory = tmp_path_factory.mktemp("profile")
-    init_profile(directory, ["testhost"])
+    init_profile(directory, ["testhost"], robots=getattr(request, "param", []))
     return directory
 
 
-@contextlib.contextmanager
-def router_of(profile, log_path):
-    """A router of ``profile`` on a free port (yielded), stopped after."""
+@pytest.fixture
+def secure_router(profile, tmp_path):
     port = free_port()
     process = Process([sys.executable, "-m", "balltrack", "router", "--secure", str(profile),
-                       "--listen", f"tls/127.0.0.1:{port}"], log_path)
+                       "--listen", f"tls/127.0.0.1:{port}"], tmp_path / "router.log")
     process.wait_for_output("listening on", 20)
     yield port
     assert process.stop() == 0, process.output()
 
 
-@contextlib.contextmanager
-def sessions_of(profile, port: int):
-    """``open_as("locator")``: a session opened with that role's client config, at the router
-    on ``port``; ``open_as("follower", "robot1")``: with the robot's own, in a fleet's profile."""
+@pytest.fixture
+def as_role(profile, secure_router):
+    """``as_role("locator")``: a session opened with that role's client config;
+    ``as_role("follower", "robot1")``: with the robot's own, in a fleet's profile."""
     opened = []
 
     def open_as(role: str, robot: str = ""):
-        session = open_session([f"tls/localhost:{port}"], str(secure_client_path(profile, role, robot)),
+        session = open_session([f"tls/localhost:{secure_router}"], str(secure_client_path(profile, role, robot)),
                                open_timeout=10)
         opened.append(session)
         return session
@@ -66,19 +66,6 @@ def sessions_of(profile, port: int):
     yield open_as
     for session in opened:
         session.close()
-
-
-@pytest.fixture
-def secure_router(profile, tmp_path):
-    with router_of(profile, tmp_path / "router.log") as port:
-        yield port
-
-
-@pytest.fixture
-def as_role(profile, secure_router):
-    """``as_role("locator")``: a session opened with that role's client config."""
-    with sessions_of(profile, secure_router) as open_as:
-        yield open_as
 
 
 @pytest.fixture
@@ -491,38 +478,20 @@ def test_a_config_query_the_access_control_drops_says_it_may_be_that(profile, si
 
 
 # -- a fleet: each robot's roles confined to its namespace ------------------------------------
-ROBOTS = ("robot1", "robot2")
-
-
-@pytest.fixture(scope="module")
-def fleet(tmp_path_factory):
-    directory = tmp_path_factory.mktemp("fleet")
-    init_profile(directory, ["testhost"], robots=list(ROBOTS))
-    return directory
-
-
-@pytest.fixture
-def fleet_router(fleet, tmp_path):
-    with router_of(fleet, tmp_path / "router.log") as port:
-        yield port
-
-
-@pytest.fixture
-def as_fleet_role(fleet, fleet_router):
-    """``as_fleet_role("follower", "robot1")``: robot1's own follower; ``as_fleet_role("operator")``:
-    a fleet-wide role."""
-    with sessions_of(fleet, fleet_router) as open_as:
-        yield open_as
+ROBOTS = ["robot1", "robot2"]
+# A test marked FLEET runs over a fleet's profile, of ROBOTS (the profile fixture's indirect parameter).
+FLEET = pytest.mark.parametrize("profile", [ROBOTS], indirect=True, ids=["fleet"])
 
 
 def payloads(collector: Collector) -> set[bytes]:
     return {message["payload"] for message in collector.messages}
 
 
-def test_a_robots_follower_drives_its_own_robot_only(as_fleet_role):
-    operator = as_fleet_role("operator")  # one session hears both robots' cmd_vel, in the order routed
+@FLEET
+def test_a_robots_follower_drives_its_own_robot_only(as_role):
+    operator = as_role("operator")  # one session hears both robots' cmd_vel, in the order routed
     commands = {robot: Collector(operator, f"{robot}/cmd_vel", None) for robot in ROBOTS}
-    followers = {robot: as_fleet_role("follower", robot) for robot in ROBOTS}
+    followers = {robot: as_role("follower", robot) for robot in ROBOTS}
     put_until_seen(followers["robot2"], "robot2/cmd_vel", b"robot2's own", commands["robot2"])
     put_until_seen(followers["robot1"], "robot1/cmd_vel", b"robot1's own", commands["robot1"])
     # robot1's follower knows robot2/cmd_vel has a subscriber, so its put is sent: the router drops it.
@@ -535,32 +504,35 @@ def test_a_robots_follower_drives_its_own_robot_only(as_fleet_role):
     trespass.undeclare()
 
 
-def test_a_robots_detector_reads_its_own_robots_frames_only(as_fleet_role):
-    sources = {robot: as_fleet_role("simulator", robot) for robot in ROBOTS}
-    detector = as_fleet_role("detector", "robot1")
+@FLEET
+def test_a_robots_detector_reads_its_own_robots_frames_only(as_role):
+    sources = {robot: as_role("simulator", robot) for robot in ROBOTS}
+    detector = as_role("detector", "robot1")
     own, other = (Collector(detector, f"{robot}/camera/image_raw", None) for robot in ROBOTS)
+    viewer = as_role("viewer", "robot1")  # robot1's own
+    watching, watching_own = Collector(viewer, "robot2/**", None), Collector(viewer, "robot1/camera/image_raw", None)
     # robot2's own detector and the fleet-wide one (a process serving every robot) get robot2's frames
-    robot2_frames = [Collector(as_fleet_role("detector", robot), "robot2/camera/image_raw", None)
+    robot2_frames = [Collector(as_role("detector", robot), "robot2/camera/image_raw", None)
                      for robot in ("robot2", "")]
     put_until_seen(sources["robot2"], "robot2/camera/image_raw", b"robot2's frame", robot2_frames[0])
     robot2_frames[1].wait_for(lambda messages: messages, 10, "robot2's frame at the fleet-wide detector")
     # (routed after robot2's frame went out to every subscriber allowed it)
     put_until_seen(sources["robot1"], "robot1/camera/image_raw", b"robot1's frame", own)
-    assert other.messages == []
+    watching_own.wait_for(lambda messages: messages, 10, "robot1's frame at robot1's viewer")
+    assert other.messages == watching.messages == []
 
 
-def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(fleet, fleet_router, as_fleet_role,
-                                                                         tmp_path):
+@FLEET
+def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(profile, secure_router, as_role, tmp_path):
     # On the robot: its own folder only, no fleet-wide credentials to fall back on.
     on_robot = tmp_path / "on-robot"
-    shutil.copytree(fleet / "robots" / "robot1", on_robot / "robots" / "robot1")
-    endpoint = f"tls/localhost:{fleet_router}"
-    viewer = as_fleet_role("viewer")
+    shutil.copytree(profile / "robots" / "robot1", on_robot / "robots" / "robot1")
+    endpoint = f"tls/localhost:{secure_router}"
     follower = start_service("follower", endpoint, tmp_path, "--namespace", "robot1", "--secure", str(on_robot))
     try:
-        Liveliness(viewer, "robot1").wait("follower", timeout=40)
-        # (the fleet's view: every robot's tokens, as `balltrack status` reads them)
-        assert services_by_namespace(viewer) == {"robot1": {"follower"}}
+        Liveliness(as_role("viewer", "robot1"), "robot1").wait("follower", timeout=40)
+        # (the fleet-wide viewer's view: every robot's tokens, as `balltrack status` reads them)
+        assert services_by_namespace(as_role("viewer")) == {"robot1": {"follower"}}
     finally:
         assert follower.stop() == 0, follower.output()
     elsewhere = start_service("follower", endpoint, tmp_path, "--namespace", "robot2", "--secure", str(on_robot))

@@ -239,7 +239,8 @@ def test_a_fleets_robot_roles_reach_only_their_own_namespace():
     robot_roles = [f"{role}@{robot}" for robot in ROBOTS for role in ROBOT_ROLES]
     assert list(subjects) == [*FLEET_ROLES, *robot_roles]
     assert set(FLEET_ROLES) == {"detector", "locator", "follower", "viewer", "operator"}
-    assert set(ROBOT_ROLES) == set(SERVICES)  # (no fleet-wide frame source: one runs per robot)
+    # (no fleet-wide frame source: one runs per robot; a robot's viewer watches it alone)
+    assert set(ROBOT_ROLES) == {*SERVICES, "viewer"}
     assert subjects["follower@robot1"] == {"id": "follower@robot1", "cert_common_names": ["balltrack follower@robot1"],
                                            "usernames": ["follower@robot1"]}
     for policy in acl["policies"]:
@@ -262,6 +263,11 @@ def test_a_fleets_robot_roles_reach_only_their_own_namespace():
     assert rules["viewer subscribe"]["key_exprs"] == ["robot1/**", "robot2/**"]
     assert rules["viewer watch"]["key_exprs"] == rules["operator watch tokens"]["key_exprs"] == ["**/alive/*"]
     assert rules["locator token"]["key_exprs"] == ["robot1/alive/locator", "robot2/alive/locator"]
+    # A robot's viewer: its robot's keys and tokens, not the admin space (every robot's keys).
+    assert [rule for rule in rules if rule.startswith("viewer@robot1")] == [
+        "viewer@robot1 subscribe", "viewer@robot1 subscribe delivery", "viewer@robot1 watch",
+        "viewer@robot1 watch tokens"]
+    assert rules["viewer@robot1 watch"]["key_exprs"] == ["robot1/alive/*"]
     # Without --robots, the rules as they were.
     assert access_control("ns")["subjects"] == [{"id": role, "cert_common_names": [f"balltrack {role}"],
                                                  "usernames": [role]} for role in ROLES]
@@ -278,7 +284,8 @@ def test_a_fleet_profile_writes_each_robots_credentials(tmp_path):
     assert users["follower@robot1"] == (folder / "password").read_text().strip() != users["follower"]
     config = load_config_file(folder / "client.json5")
     assert config.get_json("transport/auth/usrpwd/user") == '"follower@robot1"'
-    assert config.get_json("transport/link/tls/connect_certificate") == json.dumps(str(folder.resolve() / "follower.pem"))
+    certificate_path = config.get_json("transport/link/tls/connect_certificate")
+    assert certificate_path == json.dumps(str(folder.resolve() / "follower.pem"))
     assert mode(folder / "follower.key") == mode(folder / "password") == mode(folder / "client.json5") == 0o600
     router = "".join(line for line in (directory / "a" / "router.json5").read_text().splitlines(True)
                      if not line.startswith("//"))  # (its header)
@@ -336,6 +343,6 @@ def test_renew_replaces_one_robots_role(tmp_path, capsys):
     password = (directory / "robots" / "robot1" / "follower" / "password").read_text().strip()
     assert users(directory / "a" / "users.txt")["follower@robot1"] == password
     capsys.readouterr()
-    for name in ("follower@robot3", "viewer@robot1", "follower@"):
+    for name in ("follower@robot3", "operator@robot1", "follower@"):
         assert main(["secure", "renew", str(directory), name]) == 2
         assert capsys.readouterr().err.count("\n") == 1
