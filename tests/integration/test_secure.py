@@ -26,7 +26,7 @@ from balltrack.common.status import liveliness_keys, services_by_namespace
 from balltrack.deploy.secure import init_profile, permissions
 from balltrack.services.simulator.control import send_command
 from tests.harness import (Collector, Liveliness, Process, process_environment, put_until, start_service,
-                           wait_matched)
+                           wait_matched, wait_until)
 
 SMALL = ("--set", "width=160", "--set", "height=120")
 # Opening a refused session waits this long (Zenoh retries the link until then).
@@ -529,12 +529,18 @@ def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(profile
     shutil.copytree(profile / "robots" / "robot1", on_robot / "robots" / "robot1")
     endpoint = f"tls/localhost:{secure_router}"
     follower = start_service("follower", endpoint, tmp_path, "--namespace", "robot1", "--secure", str(on_robot))
+    # On the server: one locator for every robot, with the fleet-wide locator's credentials.
+    locator = start_service("locator", endpoint, tmp_path, "--namespaces", ",".join(ROBOTS), "--secure", str(profile))
     try:
         Liveliness(as_role("viewer", "robot1"), "robot1").wait("follower", timeout=40)
+        Liveliness(as_role("viewer", "robot2"), "robot2").wait("locator", timeout=40)
         # (the fleet-wide viewer's view: every robot's tokens, as `balltrack status` reads them)
-        assert services_by_namespace(as_role("viewer")) == {"robot1": {"follower"}}
+        fleet_viewer = as_role("viewer")
+        wait_until(lambda: services_by_namespace(fleet_viewer) == {"robot1": {"follower", "locator"},
+                                                                   "robot2": {"locator"}},
+                   20, "every robot's services in the fleet-wide viewer's view", follower, locator)
     finally:
-        assert follower.stop() == 0, follower.output()
+        assert [follower.stop(), locator.stop()] == [0, 0], follower.output() + locator.output()
     elsewhere = start_service("follower", endpoint, tmp_path, "--namespace", "robot2", "--secure", str(on_robot))
     assert elsewhere.popen.wait(60) == 2
     assert (f"--secure: no {on_robot}/robots/robot2/follower/client.json5 nor {on_robot}/follower/client.json5"
