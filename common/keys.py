@@ -103,6 +103,23 @@ def validate_namespace(namespace: str) -> str:
     return cleaned
 
 
+def namespace_list(text: str, option: str) -> list[str]:
+    """``robot1,robot2``: each namespace (``validate_namespace``), in order; ValueError naming
+    ``option``, one line, for a bad, empty or repeated one."""
+    namespaces: list[str] = []
+    for item in text.split(","):
+        try:
+            namespace = validate_namespace(item)
+        except ValueError as error:
+            raise ValueError(f"{option}: {error}") from None
+        if not namespace:
+            raise ValueError(f"{option}: {text!r} has an empty name (expected NS,NS,..., e.g. robot1,robot2)")
+        if namespace in namespaces:
+            raise ValueError(f"{option}: {namespace!r} is listed twice")
+        namespaces.append(namespace)
+    return namespaces
+
+
 class Keys:
     """Namespaced key strings: ``Keys("robot1")(CMD_VEL) == "robot1/cmd_vel"``."""
 

@@ -36,7 +36,8 @@ from balltrack.common.arguments import ArgumentParser
 from balltrack.common.config import (ConfigError, config_to_dict, describe_config, help_text, load_config,
                                      settings_by_service)
 from balltrack.common.context import ServiceContext, SharedLatestWorker
-from balltrack.common.keys import FRAME_SOURCES, PROCESS_JOIN, SERVICES_OF_MANY_ROBOTS, validate_namespace
+from balltrack.common.keys import (FRAME_SOURCES, PROCESS_JOIN, SERVICES_OF_MANY_ROBOTS, namespace_list,
+                                   validate_namespace)
 from balltrack.common.messages import MessageError, decode, encode, shorten
 from balltrack.common.session import (SessionOpenError, ZenohConfigError, add_session_arguments, close_session,
                                       open_until_stopped, peer_conflict)
@@ -113,19 +114,7 @@ def robot_namespaces(args, parser: argparse.ArgumentParser, names: list[str]) ->
     if args.namespaces.strip() == DISCOVER:
         args.discover_robots = True
         return []
-    namespaces: list[str] = []
-    for item in args.namespaces.split(","):
-        try:
-            namespace = validate_namespace(item)
-        except ValueError as error:
-            raise ValueError(f"--namespaces: {error}") from None
-        if not namespace:
-            raise ValueError(f"--namespaces: {args.namespaces!r} has an empty name "
-                             "(expected NS,NS,..., e.g. robot1,robot2)")
-        if namespace in namespaces:
-            raise ValueError(f"--namespaces: {namespace!r} is listed twice")
-        namespaces.append(namespace)
-    return namespaces
+    return namespace_list(args.namespaces, "--namespaces")
 
 
 # Seconds a stopped process waits for its teardown (tokens, entities, session) before it exits

@@ -23,6 +23,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from balltrack.common.keys import validate_namespace
+
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
 # How long a client waits for its router at start before giving up (seconds); -1 = forever.
@@ -34,6 +36,10 @@ ROUTER_CONFIG = "router.json5"
 SECURE_FILE_SETTINGS = tuple(f"transport/link/tls/{name}" for name in (
     "root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
     "connect_certificate")) + ("transport/auth/usrpwd/dictionary_file",)
+# A fleet's profile (`balltrack secure init --robots`) adds DIR/robots/<robot>/<role>/ per robot,
+# each reaching only its own robot's keys; a robot's name is a folder name and a user name's part.
+ROBOTS_FOLDER = "robots"
+ROBOT_NAME = r"[A-Za-z0-9]([A-Za-z0-9._-]*[A-Za-z0-9])?"
 # Who the `balltrack` commands (status, echo, config, sim...) are in a secure profile: one that
 # reads; pub, sim, config and play ask for --role operator (balltrack/cli/session.py).
 DEFAULT_COMMAND_ROLE = "viewer"
@@ -144,13 +150,30 @@ def load_config_file(path: str | Path):
     return config
 
 
-def secure_client_path(directory: str | Path, role: str) -> Path:
-    """A role's client config in a secure profile; ValueError with one line if absent."""
+def secure_client_path(directory: str | Path, role: str, namespace: str = "") -> Path:
+    """A role's client config in a secure profile; ValueError with one line if absent. A process
+    serving one robot (``namespace``) uses the robot's own credentials where the profile has
+    them (a fleet's: ``secure init --robots``), the role's fleet-wide ones otherwise."""
     path = Path(directory) / role / SECURE_CLIENT_CONFIG
+    robot = (Path(directory) / ROBOTS_FOLDER / namespace / role / SECURE_CLIENT_CONFIG
+             if re.fullmatch(ROBOT_NAME, namespace) else None)
+    if robot is not None and robot.is_file():
+        return robot
     if not path.is_file():
-        raise ValueError(f"--secure: no {path} (not a profile from `balltrack secure init`, or "
-                         f"role {role}'s folder was not copied here)")
+        raise ValueError(f"--secure: no {f'{robot} nor ' if robot else ''}{path} (not a profile from "
+                         f"`balltrack secure init`, or role {role}'s folder was not copied here)")
     return path
+
+
+def served_namespace(args) -> str:
+    """The one robot a process serves (``--namespace``, or ``--namespaces`` naming one), whose
+    credentials it uses in a fleet's profile; "" when it serves several."""
+    namespaces = getattr(args, "namespaces", None)
+    if getattr(args, "discover_robots", False) or (isinstance(namespaces, list) and len(namespaces) > 1):
+        return ""
+    if isinstance(namespaces, list) and namespaces:
+        return namespaces[0]
+    return validate_namespace(getattr(args, "namespace", None) or "")
 
 
 def secure_router_path(directory: str | Path, host: str | None = None) -> Path:
@@ -298,7 +321,7 @@ def open_from_args(args, open_timeout: float | None = None):
     zenoh_config = getattr(args, "zenoh_config", None)
     if getattr(args, "secure", None):
         try:
-            zenoh_config = str(secure_client_path(args.secure, args.role))
+            zenoh_config = str(secure_client_path(args.secure, args.role, served_namespace(args)))
         except ValueError as error:  # (a bad --secure, as a bad --zenoh-config: not worth waiting for)
             raise ZenohConfigError(str(error)) from None
     return open_session(args.connect, zenoh_config, open_timeout, getattr(args, "peer", False))

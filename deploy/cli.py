@@ -163,10 +163,11 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
             if router:
                 secure_router_path(secure, host)
             for role in [*services, "viewer"]:
-                secure_client_path(secure, role)
+                secure_client_path(secure, role, Keys(namespace).namespace)
         except ValueError as error:
             raise LaunchError(str(error)) from None
-        zenoh_config = str(secure_client_path(absolute(secure), "viewer"))  # for wait_alive and status
+        # for wait_alive and status (a robot's own viewer in a fleet's profile)
+        zenoh_config = str(secure_client_path(absolute(secure), "viewer", Keys(namespace).namespace))
     specs: list[ChildSpec] = []
     if router:
         argv = [python, "-m", "balltrack", "router"]

@@ -18,6 +18,14 @@ camera frame and may publish ``cmd_vel``. The profile uses Zenoh's own mechanism
   subscribes to, answers and asks, and its own liveliness token ``alive/<role>``. Another host's
   router passes everything, on router-to-router links only (see :func:`access_control`).
 
+A fleet (``--robots robot1,robot2``): each robot's namespace is its name, and each robot has
+credentials of its own for every service role and a viewer (:data:`ROBOT_ROLES`), subject
+``<role>@<robot>``, allowed the role's keys under ``<robot>/`` only (no admin space): robot1's
+follower cannot put ``robot2/cmd_vel`` nor its detector read robot2's frames. The fleet-wide
+roles (:data:`FLEET_ROLES`: viewer, operator, and the services one process may run for several
+robots) get the same rules for every robot's namespace, and the watchers every robot's
+liveliness tokens (``**/alive/*``).
+
 Every process is a Zenoh client of a router: peers would mesh directly, around the routers'
 access control. What each role may do is :data:`ROLES` plus the key table
 (``common/keys.py``: who publishes what), checked against the running services by
@@ -30,6 +38,7 @@ The folder written by :func:`init_profile`::
                                  them), router-link.pem, router-link.key (it joins other routers
                                  with them), ca.pem, users.txt
     DIR/<role>/client.json5      a role's config, with <role>.pem, <role>.key, ca.pem, password
+    DIR/robots/<robot>/<role>/   with --robots: a robot's own credentials for a role, as above
 
 The json5 files name their other files relative to their own folder (``ca.pem``): balltrack
 (``--secure DIR``) resolves them there, so a folder can be copied anywhere; ``zenohd -c`` and
@@ -49,9 +58,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from balltrack.common import keys as key_table
-from balltrack.common.keys import SERVICES, Keys
-from balltrack.common.session import (ROUTER_CONFIG, SECURE_CLIENT_CONFIG, SECURE_FILE_SETTINGS, load_config_file,
-                                      secure_client_path)
+from balltrack.common.keys import SERVICES, SERVICES_OF_MANY_ROBOTS, Keys, alive_key, namespace_list
+from balltrack.common.session import (ROBOT_NAME, ROBOTS_FOLDER, ROUTER_CONFIG, SECURE_CLIENT_CONFIG,
+                                      SECURE_FILE_SETTINGS, load_config_file, secure_client_path)
 
 DEFAULT_PORT = 7447
 # A leaf certificate lives about two years (CA/Browser Forum's old 825-day limit); `secure renew`
@@ -114,6 +123,36 @@ ROLES: dict[str, Role] = {
 }
 
 
+# In a fleet's profile (--robots): the roles that see the whole fleet (a person watching or
+# driving, a process serving several robots: `balltrack run locator --namespaces ...`), and the
+# roles each robot has of its own: its services, and a viewer of it alone (`deploy start` on the
+# robot watches its services with it). A frame source runs per robot: no fleet-wide one.
+FLEET_ROLES = tuple(role for role in ROLES if role in SERVICES_OF_MANY_ROBOTS or role not in SERVICES)
+ROBOT_ROLES = tuple(role for role in ROLES if role in SERVICES or role == "viewer")
+
+
+@dataclass(frozen=True)
+class Identity:
+    """Who holds one set of credentials: a role, fleet-wide or one ``robot``'s own."""
+    role: str
+    robot: str = ""
+
+    @property
+    def name(self) -> str:
+        """Its user name and access control subject (``follower@robot1``)."""
+        return f"{self.role}@{self.robot}" if self.robot else self.role
+
+    def folder(self, directory: Path) -> Path:
+        return directory / ROBOTS_FOLDER / self.robot / self.role if self.robot else directory / self.role
+
+
+def identities(robots: list[str] = ()) -> list[Identity]:
+    """Every role; with ``robots`` (a fleet), the fleet-wide roles and each robot's own."""
+    if not robots:
+        return [Identity(role) for role in ROLES]
+    return [*map(Identity, FLEET_ROLES), *(Identity(role, robot) for robot in robots for role in ROBOT_ROLES)]
+
+
 def table_publishers(spec: key_table.KeySpec) -> set[str]:
     """The services the key table names as ``spec``'s publisher ("simulator or camera")."""
     if spec.publisher == "every service":
@@ -154,9 +193,10 @@ def _rule(identifier: str, messages: list[str], flows: list[str], key_exprs: lis
             "key_exprs": key_exprs}
 
 
-def access_control(namespace: str = "", hosts: list[str] = ()) -> dict:
-    """The routers' ``access_control`` section: default deny, one subject and policy per role,
-    and with ``hosts`` (a cluster) the router-to-router links between them.
+def access_control(namespace: str = "", hosts: list[str] = (), robots: list[str] = ()) -> dict:
+    """The routers' ``access_control`` section: default deny, one subject and policy per role
+    (with ``robots``, per identity: see the module docstring), and with ``hosts`` (a cluster)
+    the router-to-router links between them.
 
     A router checks what a client sends it (ingress) and what it forwards to a client (egress),
     so each operation needs both halves: a put is allowed in from its publisher and out to
@@ -165,24 +205,30 @@ def access_control(namespace: str = "", hosts: list[str] = ()) -> dict:
     ``*/stats`` inside ``detector/stats``). A publisher is told of every subscription (egress
     declare_subscriber on ``**``): Zenoh sends a put only where it knows of a subscriber, and
     the detector draws image_out only while someone watches."""
-    keys = Keys(namespace)
-    name = lambda key: key if key.startswith("@/") else keys(key)  # noqa: E731 - admin space has no namespace
     rules, subjects, policies = [], [], []
-    for role in ROLES:
-        granted = permissions(role)
-        role_rules = []
+    for identity in identities(robots):
+        granted, role_rules = permissions(identity.role), []
+        spaces = [Keys(robot) for robot in ([identity.robot] if identity.robot else robots)] or [Keys(namespace)]
+        # Every robot's liveliness tokens for a fleet-wide watcher: `balltrack status` finds the
+        # robots by them, and only a robot's own roles may declare one, under its namespace.
+        fleet_watch = bool(robots and not identity.robot)
 
-        def add(kind: str, messages: list[str], flows: list[str], key_list) -> None:
-            if key_list:
-                role_rules.append(_rule(f"{role} {kind}", messages, flows, [name(key) for key in key_list]))
+        def add(kind: str, messages: list[str], flows: list[str], key_list, namespaced: bool = True) -> None:
+            # The admin space has no namespace: it shows the whole router (every robot's keys),
+            # so a robot's own roles get none of it.
+            names = [keys(key) if namespaced and not key.startswith("@/") else key
+                     for keys in spaces for key in key_list if not (identity.robot and key.startswith("@/"))]
+            if names:
+                role_rules.append(_rule(f"{identity.name} {kind}", messages, flows, list(dict.fromkeys(names))))
 
         add("put", ["put"], ["ingress"], granted.puts)
         if granted.puts:
             # Who subscribes, as declared: a subscription to `*/stats` is not inside
             # `detector/stats`, and a publisher that never hears of it sends nothing (Zenoh
             # filters puts nobody wants at the writer). This tells a publisher only that
-            # someone listens, never what is said.
-            role_rules.append(_rule(f"{role} put matching", ["declare_subscriber"], ["egress"], ["**"]))
+            # someone listens, never what is said. A robot's publisher hears of the other robots'
+            # subscriptions too: its put to their keys reaches the router, whose rules drop it.
+            role_rules.append(_rule(f"{identity.name} put matching", ["declare_subscriber"], ["egress"], ["**"]))
         add("subscribe", ["declare_subscriber"], ["ingress"], granted.subscribes)
         add("subscribe delivery", ["put"], ["egress"], granted.subscribes)
         add("answer", ["declare_queryable", "reply"], ["ingress"], granted.answers)
@@ -190,11 +236,14 @@ def access_control(namespace: str = "", hosts: list[str] = ()) -> dict:
         add("query", ["query"], ["ingress"], granted.queries)
         add("query replies", ["reply", "declare_queryable"], ["egress"], granted.queries)
         add("token", ["liveliness_token"], ["ingress"], granted.tokens)
-        add("watch", ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"], granted.watches)
-        add("watch tokens", ["liveliness_token"], ["egress"], granted.watches)
+        watches = [f"**/{alive_key('*')}"] if fleet_watch and granted.watches else granted.watches
+        add("watch", ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"], watches, not fleet_watch)
+        add("watch tokens", ["liveliness_token"], ["egress"], watches, not fleet_watch)
         rules += role_rules
-        subjects.append({"id": role, "cert_common_names": [client_common_name(role)], "usernames": [role]})
-        policies.append({"id": role, "rules": [rule["id"] for rule in role_rules], "subjects": [role]})
+        subjects.append({"id": identity.name, "cert_common_names": [client_common_name(identity.name)],
+                         "usernames": [identity.name]})
+        policies.append({"id": identity.name, "rules": [rule["id"] for rule in role_rules],
+                         "subjects": [identity.name]})
     if hosts:
         # Routers of a cluster forward for their own clients, whose rights their own router
         # checked: between routers everything passes, on router-to-router links only. Each side
@@ -216,8 +265,9 @@ def access_control(namespace: str = "", hosts: list[str] = ()) -> dict:
 
 
 # -- certificates -----------------------------------------------------------------------------
-def client_common_name(role: str) -> str:
-    return f"balltrack {role}"
+def client_common_name(identity: str) -> str:
+    """A role's certificate (``balltrack follower``), or a robot's own (``balltrack follower@robot1``)."""
+    return f"balltrack {identity}"
 
 
 def router_common_name(host: str) -> str:
@@ -367,6 +417,20 @@ def parse_hosts(text: str) -> list[str]:
     return hosts
 
 
+def parse_robots(text: str) -> list[str]:
+    """``--robots robot1,robot2``: each robot's namespace, in order; ProfileError (one line)."""
+    try:
+        robots = namespace_list(text, "--robots")
+    except ValueError as error:
+        raise ProfileError(str(error)) from None
+    for robot in robots:
+        # (it names a folder and is part of a user name: users.txt splits at the first ':')
+        if not re.fullmatch(ROBOT_NAME, robot):
+            raise ProfileError(f"--robots: {robot!r}: a robot's name is letters, digits, '.', '_' and '-' "
+                               "(one namespace level)")
+    return robots
+
+
 def router_names(host: str, local: bool) -> list[str]:
     """The names a router's certificate answers to: its host name, and localhost/127.0.0.1
     (the address its own host's processes dial) unless ``local`` is off."""
@@ -378,12 +442,17 @@ def _endpoint_host(host: str) -> str:
 
 
 def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PORT, namespace: str = "",
-                 local: bool = True, force: bool = False, days: int = LEAF_DAYS) -> dict:
+                 local: bool = True, force: bool = False, days: int = LEAF_DAYS, robots: list[str] = ()) -> dict:
     """Write a secure profile into ``directory`` (see the module docstring); a summary.
+    ``robots`` (from ``parse_robots``): a fleet, each robot under its own namespace.
 
     Raises ProfileError if the folder already holds a profile and ``force`` is off."""
     directory = Path(directory)
     Keys(namespace)  # ValueError for a namespace Zenoh cannot route
+    if robots and namespace:
+        raise ProfileError("--robots: each robot's namespace is its name; no --namespace with it")
+    if robots and ROBOTS_FOLDER in hosts:
+        raise ProfileError(f"--hosts: {ROBOTS_FOLDER!r} is the folder of the robots' credentials; name hosts otherwise")
     if not 0 < port < 65536:
         raise ProfileError(f"--port: {port} is not a TCP port")
     if directory.exists() and not directory.is_dir():
@@ -391,6 +460,8 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
     # Anything of a previous profile: its CA, its hosts' and roles' folders (even hosts no longer named).
     previous = [directory / "ca", *(directory / name for name in (*hosts, *ROLES)),
                 *(path.parent for path in directory.glob(f"*/{ROUTER_CONFIG}"))]
+    if any(directory.glob(f"{ROBOTS_FOLDER}/*/*/{SECURE_CLIENT_CONFIG}")):  # (a fleet's)
+        previous.append(directory / ROBOTS_FOLDER)
     existing = list(dict.fromkeys(path.name for path in previous if path.exists()))
     if existing and not force:
         raise ProfileError(f"{directory} already holds a profile ({', '.join(existing[:3])}...); "
@@ -402,8 +473,10 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
     _write(directory / "ca" / "ca.pem", _certificate_pem(authority[1]))
     _write(directory / "ca" / "ca.key", _key_pem(authority[0]), private=True)
 
-    passwords = {name: secrets.token_urlsafe(24) for name in (*ROLES, *map(router_user, hosts))}
-    acl = access_control(namespace, hosts if len(hosts) > 1 else [])
+    members = identities(robots)
+    passwords = {name: secrets.token_urlsafe(24) for name in (*(member.name for member in members),
+                                                              *map(router_user, hosts))}
+    acl = access_control(namespace, hosts if len(hosts) > 1 else [], robots)
     tls_common = {"root_ca_certificate": "ca.pem", "enable_mtls": True, "verify_name_on_connect": True}
 
     for host in hosts:
@@ -440,9 +513,9 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
         _write(folder / ROUTER_CONFIG, _json5(header, settings), private=True)
 
     local_endpoint = f"tls/localhost:{port}" if local else f"tls/{_endpoint_host(hosts[0])}:{port}"
-    for role in ROLES:
-        folder = directory / role
-        _write_role_files(directory, authority, role, passwords[role], days)
+    for member in members:
+        role, folder = member.role, member.folder(directory)
+        _write_role_files(folder, authority, member, passwords[member.name], days)
         settings = {
             "mode": "client",
             "connect": {"endpoints": [local_endpoint], "timeout_ms": 30000,
@@ -452,17 +525,21 @@ def init_profile(directory: Path | str, hosts: list[str], port: int = DEFAULT_PO
                 "link": {"protocols": ["tls"],
                          "tls": {**tls_common, "connect_private_key": f"{role}.key",
                                  "connect_certificate": f"{role}.pem"}},
-                "auth": {"usrpwd": {"user": role, "password": passwords[role]}},
+                "auth": {"usrpwd": {"user": member.name, "password": passwords[member.name]}},
             },
         }
-        header = (f"balltrack secure profile: role {role}.\n"
-                  f"  balltrack run {role} --secure {directory}   (or --zenoh-config, started in this folder)\n"
+        serving, of_robot = (f" --namespace {member.robot}", f" of robot {member.robot}") if member.robot else ("", "")
+        header = (f"balltrack secure profile: role {role}{of_robot}.\n"
+                  f"  balltrack run {role}{serving} --secure {directory}   "
+                  "(or --zenoh-config, started in this folder)\n"
                   f"--connect tls/HOST:{port} replaces the endpoint; HOST must be a name of that router's "
                   "certificate.")
         if role not in SERVICES:
             header = header.replace(f"balltrack run {role}", "balltrack status --role " + role)
         _write(folder / SECURE_CLIENT_CONFIG, _json5(header, settings), private=True)
-    return {"directory": str(directory), "hosts": hosts, "roles": list(ROLES), "port": port,
+    return {"directory": str(directory), "hosts": hosts,
+            "roles": [member.role for member in members if not member.robot],
+            "robots": list(robots), "robot_roles": list(ROBOT_ROLES) if robots else [], "port": port,
             "router_names": {host: router_names(host, local) for host in hosts},
             "client_endpoint": local_endpoint}
 
@@ -479,12 +556,11 @@ def _write_router_files(directory: Path, authority, host: str, names: list[str],
         _write(folder / f"{stem}.key", _key_pem(key), private=True)
 
 
-def _write_role_files(directory: Path, authority, role: str, password: str, days: int) -> None:
-    folder = directory / role
-    key, certificate = make_leaf(authority, client_common_name(role), days=days)
+def _write_role_files(folder: Path, authority, identity: Identity, password: str, days: int) -> None:
+    key, certificate = make_leaf(authority, client_common_name(identity.name), days=days)
     _write(folder / "ca.pem", _certificate_pem(authority[1]))
-    _write(folder / f"{role}.pem", _certificate_pem(certificate))
-    _write(folder / f"{role}.key", _key_pem(key), private=True)
+    _write(folder / f"{identity.role}.pem", _certificate_pem(certificate))
+    _write(folder / f"{identity.role}.key", _key_pem(key), private=True)
     _write(folder / "password", password + "\n", private=True)
 
 
@@ -518,20 +594,26 @@ def _set_user(users_path: Path, user: str, password: str) -> bool:
 def renew(directory: Path | str, names: list[str], days: int = LEAF_DAYS) -> dict:
     """A new key, certificate and password for each role or host of ``names``, signed by the
     profile's CA, in place: the rest of the profile (the other keys, the access control) stays.
-    A role: its folder and its line in every host's users.txt; a host: its router's
-    certificates, keys and password (router.json5) and its line in the other hosts' users.txt.
+    A role (or a robot's, ``follower@robot1``): its folder and its line in every host's
+    users.txt; a host: its router's certificates, keys and password (router.json5) and its line
+    in the other hosts' users.txt.
     The routers read users.txt when they start. {"changed": folders written, "users": the
     users.txt files changed}; ProfileError (one line) for a name the profile lacks or no CA key.
     """
     directory = Path(directory)
     hosts = profile_hosts(directory)
+    members = {}
     for name in names:
-        if name not in ROLES and name not in hosts:
-            raise ProfileError(f"{name!r} is neither a role ({', '.join(ROLES)}) nor a host of {directory} "
-                               f"({', '.join(hosts) or 'none'})")
-        if name in ROLES and not (directory / name / SECURE_CLIENT_CONFIG).is_file():
-            raise ProfileError(f"no {directory / name / SECURE_CLIENT_CONFIG}: renew where the whole profile is")
-        if name in hosts and not (directory / name / "router-link.pem").is_file():
+        if name not in hosts:
+            role, at, robot = name.partition("@")
+            if role not in (ROBOT_ROLES if at else ROLES) or (at and not re.fullmatch(ROBOT_NAME, robot)):
+                raise ProfileError(f"{name!r} is neither a role ({', '.join(ROLES)}), a robot's role "
+                                   f"(ROLE@ROBOT) nor a host of {directory} ({', '.join(hosts) or 'none'})")
+            members[name] = Identity(role, robot)
+            config = members[name].folder(directory) / SECURE_CLIENT_CONFIG
+            if not config.is_file():
+                raise ProfileError(f"no {config}: renew where the whole profile is")
+        elif not (directory / name / "router-link.pem").is_file():
             # (its router.json5 dials with router.pem, which a new one could not do)
             raise ProfileError(f"host {name}'s folder has no router-link.pem (a profile of an earlier "
                                "balltrack): `secure init --force` writes it anew")
@@ -546,17 +628,19 @@ def renew(directory: Path | str, names: list[str], days: int = LEAF_DAYS) -> dic
     users_changed = []
     for name in names:
         password = secrets.token_urlsafe(24)
-        if name in ROLES:
-            _write_role_files(directory, authority, name, password, days)
-            _replace_password(directory / name / SECURE_CLIENT_CONFIG, password)
-            user = name
+        if name in members:
+            folder = members[name].folder(directory)
+            _write_role_files(folder, authority, members[name], password, days)
+            _replace_password(folder / SECURE_CLIENT_CONFIG, password)
+            user = members[name].name
         else:
             _write_router_files(directory, authority, name, certificate_names(directory / name / "router.pem"), days)
             _replace_password(directory / name / ROUTER_CONFIG, password)
             user = router_user(name)
         users_changed += [str(directory / host / "users.txt") for host in hosts
                           if _set_user(directory / host / "users.txt", user, password)]
-    return {"changed": [str(directory / name) for name in names], "users": sorted(set(users_changed))}
+    changed = [members[name].folder(directory) if name in members else directory / name for name in names]
+    return {"changed": list(map(str, changed)), "users": sorted(set(users_changed))}
 
 
 def client_files(directory: Path | str, role: str) -> Path:
@@ -564,6 +648,6 @@ def client_files(directory: Path | str, role: str) -> Path:
     return secure_client_path(directory, role)
 
 
-__all__ = ["ROLES", "Role", "Permissions", "permissions", "access_control", "init_profile", "ProfileError",
-           "parse_hosts", "router_names", "make_authority", "make_leaf", "client_files", "renew", "profile_hosts",
-           "SECURE_FILE_SETTINGS"]
+__all__ = ["ROLES", "FLEET_ROLES", "ROBOT_ROLES", "Identity", "identities", "parse_robots", "Role", "Permissions",
+           "permissions", "access_control", "init_profile", "ProfileError", "parse_hosts", "router_names",
+           "make_authority", "make_leaf", "client_files", "renew", "profile_hosts", "SECURE_FILE_SETTINGS"]

@@ -28,7 +28,7 @@ from balltrack.cli import secure
 from balltrack.cli import view
 from balltrack.cli.session import check_keys
 from balltrack.common.keys import Keys
-from balltrack.common.session import client_config, secure_client_path
+from balltrack.common.session import client_config, secure_client_path, served_namespace
 from balltrack.common.arguments import ArgumentParser
 from balltrack.common.terminal import interruptible, silence_closed_stdout
 
@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
                 # config is built: a bad argument, said before the command starts its work.
                 client_config(getattr(args, "connect", None), getattr(args, "zenoh_config", None))
             if getattr(args, "secure", None) and hasattr(args, "role"):
-                secure_client_path(args.secure, args.role)  # (the profile holds this command's role)
+                secure_client_path(args.secure, args.role, served_namespace(args))  # (the profile holds its role)
             # (the key a command watches or publishes, or the keys it records; play's keys are
             # the recording's, checked against it)
             if args.namespace is not None:

@@ -1,9 +1,10 @@
-"""``balltrack secure init DIR --hosts NAME[,NAME...]``: a secure deployment profile;
+"""``balltrack secure init DIR --hosts NAME[,NAME...] [--robots NAME[,NAME...]]``: a secure deployment profile;
 ``balltrack secure renew DIR NAME[,NAME...]``: new credentials for some of its roles or hosts.
 
 A certificate authority, a router certificate per host, a certificate and a password per role,
 the routers' users file and the Zenoh json5 configs (TLS with mutual authentication, user and
-password, access control): see ``deploy/secure.py``. Then ``balltrack router --secure DIR``,
+password, access control), with ``--robots`` each robot's own credentials, confined to its
+namespace: see ``deploy/secure.py``. Then ``balltrack router --secure DIR``,
 ``balltrack run SERVICE --secure DIR``, ``balltrack deploy start --secure DIR``.
 """
 
@@ -11,7 +12,8 @@ import argparse
 import sys
 
 from balltrack.common.arguments import integer
-from balltrack.deploy.secure import DEFAULT_PORT, LEAF_DAYS, ROLES, ProfileError, init_profile, parse_hosts, renew
+from balltrack.deploy.secure import (DEFAULT_PORT, LEAF_DAYS, ROLES, ProfileError, init_profile, parse_hosts,
+                                     parse_robots, renew)
 
 
 def _attempt(args, work) -> dict | int:
@@ -29,7 +31,8 @@ def _attempt(args, work) -> dict | int:
 
 def command_init(args) -> int:
     summary = _attempt(args, lambda: init_profile(args.directory, parse_hosts(args.hosts), args.port, args.namespace,
-                                                  local=not args.no_localhost, force=args.force, days=args.days))
+                                                  local=not args.no_localhost, force=args.force, days=args.days,
+                                                  robots=parse_robots(args.robots) if args.robots is not None else []))
     if isinstance(summary, int):
         return summary
     directory = summary["directory"]
@@ -38,6 +41,9 @@ def command_init(args) -> int:
         print(f"  router {host:<12} {directory}/{host}/   certificate names: {', '.join(names)}")
     print(f"  roles: {', '.join(summary['roles'])}   ({directory}/<role>/, "
           f"clients dial {summary['client_endpoint']} unless --connect)")
+    if summary["robots"]:
+        print(f"  robots: {', '.join(summary['robots'])}   ({directory}/robots/<robot>/<role>/ for "
+              f"{', '.join(summary['robot_roles'])}: each reaches only <robot>/...; run with --namespace <robot>)")
     return 0
 
 
@@ -72,6 +78,9 @@ def register(commands) -> None:
     init.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"the routers' TLS port (default {DEFAULT_PORT})")
     init.add_argument("--namespace", default="", metavar="NS",
                       help="the key prefix the services use (the access rules name full keys)")
+    init.add_argument("--robots", default=None, metavar="NAME[,NAME...]",
+                      help="a fleet: each robot's namespace is its name, and it gets credentials of its own for "
+                           "each service, allowed only its own keys (not with --namespace)")
     init.add_argument("--no-localhost", action="store_true",
                       help="router certificates name only the hosts, not localhost/127.0.0.1 "
                            "(then every client dials a host name)")
@@ -86,7 +95,8 @@ def register(commands) -> None:
                                            "host's router files, and their lines in the hosts' users.txt. The other "
                                            "keys and the access control stay.")
     again.add_argument("directory", metavar="DIR", help="the profile folder, with its CA")
-    again.add_argument("names", metavar="NAME[,NAME...]", help=f"roles ({', '.join(ROLES)}) or hosts of the profile")
+    again.add_argument("names", metavar="NAME[,NAME...]",
+                       help=f"roles ({', '.join(ROLES)}), a robot's roles (follower@robot1) or hosts of the profile")
     again.add_argument("--days", type=integer(minimum=1, maximum=36500), default=LEAF_DAYS,
                        help=f"certificate lifetime (default {LEAF_DAYS}, at most 36500)")
     again.set_defaults(handler=command_renew)

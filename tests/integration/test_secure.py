@@ -7,6 +7,7 @@ authenticate while opening the session: ``zenoh.open`` keeps retrying the link u
 connect timeout, then raises "Unable to connect to any of [...]" (our SessionOpenError). A
 client that authenticates but matches no role (a password under another role's certificate)
 opens, and every message to or from it is dropped. Frames are small (160x120) to keep the CPU low.
+Tests marked FLEET run over a fleet's profile (``--robots robot1,robot2``).
 """
 
 import json
@@ -21,10 +22,11 @@ import zenoh
 from balltrack.common.messages import encode, header
 from balltrack.common.network import free_port
 from balltrack.common.session import load_config_file, open_session, secure_client_path
-from balltrack.common.status import liveliness_keys
+from balltrack.common.status import liveliness_keys, services_by_namespace
 from balltrack.deploy.secure import init_profile, permissions
 from balltrack.services.simulator.control import send_command
-from tests.harness import Collector, Liveliness, Process, process_environment, put_until
+from tests.harness import (Collector, Liveliness, Process, process_environment, put_until, start_service,
+                           wait_matched, wait_until)
 
 SMALL = ("--set", "width=160", "--set", "height=120")
 # Opening a refused session waits this long (Zenoh retries the link until then).
@@ -32,9 +34,10 @@ REFUSED_OPEN_TIMEOUT = 3.0
 
 
 @pytest.fixture(scope="module")
-def profile(tmp_path_factory):
+def profile(tmp_path_factory, request):
+    """A one-host profile; a fleet's, of the robots given as the indirect parameter (``FLEET``)."""
     directory = tmp_path_factory.mktemp("profile")
-    init_profile(directory, ["testhost"])
+    init_profile(directory, ["testhost"], robots=getattr(request, "param", []))
     return directory
 
 
@@ -50,11 +53,12 @@ def secure_router(profile, tmp_path):
 
 @pytest.fixture
 def as_role(profile, secure_router):
-    """``as_role("locator")``: a session opened with that role's client config."""
+    """``as_role("locator")``: a session opened with that role's client config;
+    ``as_role("follower", "robot1")``: with the robot's own, in a fleet's profile."""
     opened = []
 
-    def open_as(role: str):
-        session = open_session([f"tls/localhost:{secure_router}"], str(secure_client_path(profile, role)),
+    def open_as(role: str, robot: str = ""):
+        session = open_session([f"tls/localhost:{secure_router}"], str(secure_client_path(profile, role, robot)),
                                open_timeout=10)
         opened.append(session)
         return session
@@ -471,3 +475,73 @@ def test_a_config_query_the_access_control_drops_says_it_may_be_that(profile, si
                              "does not let role viewer ask it\n")
     operator = balltrack(secure_router, profile, "config", "simulator", "--role", "operator")
     assert operator.returncode == 0 and json.loads(operator.stdout)["pacing"] == "realtime", operator.stderr
+
+
+# -- a fleet: each robot's roles confined to its namespace ------------------------------------
+ROBOTS = ["robot1", "robot2"]
+# A test marked FLEET runs over a fleet's profile, of ROBOTS (the profile fixture's indirect parameter).
+FLEET = pytest.mark.parametrize("profile", [ROBOTS], indirect=True, ids=["fleet"])
+
+
+def payloads(collector: Collector) -> set[bytes]:
+    return {message["payload"] for message in collector.messages}
+
+
+@FLEET
+def test_a_robots_follower_drives_its_own_robot_only(as_role):
+    operator = as_role("operator")  # one session hears both robots' cmd_vel, in the order routed
+    commands = {robot: Collector(operator, f"{robot}/cmd_vel", None) for robot in ROBOTS}
+    followers = {robot: as_role("follower", robot) for robot in ROBOTS}
+    put_until_seen(followers["robot2"], "robot2/cmd_vel", b"robot2's own", commands["robot2"])
+    put_until_seen(followers["robot1"], "robot1/cmd_vel", b"robot1's own", commands["robot1"])
+    # robot1's follower knows robot2/cmd_vel has a subscriber, so its put is sent: the router drops it.
+    trespass = followers["robot1"].declare_publisher("robot2/cmd_vel")
+    wait_matched(trespass)
+    trespass.put(b"robot1 into robot2")
+    # (sent after it on the same links: once this arrives, so would have the trespass)
+    put_until_seen(followers["robot1"], "robot1/cmd_vel", b"robot1's, after", commands["robot1"])
+    assert payloads(commands["robot2"]) == {b"robot2's own"}
+    trespass.undeclare()
+
+
+@FLEET
+def test_a_robots_detector_reads_its_own_robots_frames_only(as_role):
+    sources = {robot: as_role("simulator", robot) for robot in ROBOTS}
+    detector = as_role("detector", "robot1")
+    own, other = (Collector(detector, f"{robot}/camera/image_raw", None) for robot in ROBOTS)
+    viewer = as_role("viewer", "robot1")  # robot1's own
+    watching, watching_own = Collector(viewer, "robot2/**", None), Collector(viewer, "robot1/camera/image_raw", None)
+    # robot2's own detector and the fleet-wide one (a process serving every robot) get robot2's frames
+    robot2_frames = [Collector(as_role("detector", robot), "robot2/camera/image_raw", None)
+                     for robot in ("robot2", "")]
+    put_until_seen(sources["robot2"], "robot2/camera/image_raw", b"robot2's frame", robot2_frames[0])
+    robot2_frames[1].wait_for(lambda messages: messages, 10, "robot2's frame at the fleet-wide detector")
+    # (routed after robot2's frame went out to every subscriber allowed it)
+    put_until_seen(sources["robot1"], "robot1/camera/image_raw", b"robot1's frame", own)
+    watching_own.wait_for(lambda messages: messages, 10, "robot1's frame at robot1's viewer")
+    assert other.messages == watching.messages == []
+
+
+@FLEET
+def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(profile, secure_router, as_role, tmp_path):
+    # On the robot: its own folder only, no fleet-wide credentials to fall back on.
+    on_robot = tmp_path / "on-robot"
+    shutil.copytree(profile / "robots" / "robot1", on_robot / "robots" / "robot1")
+    endpoint = f"tls/localhost:{secure_router}"
+    follower = start_service("follower", endpoint, tmp_path, "--namespace", "robot1", "--secure", str(on_robot))
+    # On the server: one locator for every robot, with the fleet-wide locator's credentials.
+    locator = start_service("locator", endpoint, tmp_path, "--namespaces", ",".join(ROBOTS), "--secure", str(profile))
+    try:
+        Liveliness(as_role("viewer", "robot1"), "robot1").wait("follower", timeout=40)
+        Liveliness(as_role("viewer", "robot2"), "robot2").wait("locator", timeout=40)
+        # (the fleet-wide viewer's view: every robot's tokens, as `balltrack status` reads them)
+        fleet_viewer = as_role("viewer")
+        wait_until(lambda: services_by_namespace(fleet_viewer) == {"robot1": {"follower", "locator"},
+                                                                   "robot2": {"locator"}},
+                   20, "every robot's services in the fleet-wide viewer's view", follower, locator)
+    finally:
+        assert [follower.stop(), locator.stop()] == [0, 0], follower.output() + locator.output()
+    elsewhere = start_service("follower", endpoint, tmp_path, "--namespace", "robot2", "--secure", str(on_robot))
+    assert elsewhere.popen.wait(60) == 2
+    assert (f"--secure: no {on_robot}/robots/robot2/follower/client.json5 nor {on_robot}/follower/client.json5"
+            in elsewhere.output()), elsewhere.output()

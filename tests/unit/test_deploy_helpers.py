@@ -199,3 +199,21 @@ def test_a_secure_router_started_here_is_dialled_as_its_profile_names_it(tmp_pat
     specs, info = specs_for("--router", "--secure", str(tmp_path / "profile"), "--listen", "tls/0.0.0.0:7604",
                             "--services", "locator")
     assert info["connect"] == ["tls/127.0.0.1:7604"]
+
+
+def test_a_robots_services_start_with_the_robots_credentials_copied_to_it(tmp_path):
+    import shutil
+
+    from balltrack.deploy.secure import init_profile
+
+    init_profile(tmp_path / "fleet", ["robot1"], robots=["robot1", "robot2"])
+    # On robot1: its router's folder and its own roles' (deploy start watches as robot1's viewer).
+    on_robot = tmp_path / "on-robot"
+    for folder in ("robot1", "robots/robot1"):
+        shutil.copytree(tmp_path / "fleet" / folder, on_robot / folder)
+    specs, info = specs_for("--router", "--secure", str(on_robot), "--namespace", "robot1",
+                            "--services", "simulator,follower")
+    assert [spec.name for spec in specs] == ["router", "simulator", "follower"]
+    assert info["zenoh_config"] == str((on_robot / "robots" / "robot1" / "viewer" / "client.json5").resolve())
+    with pytest.raises(LaunchError, match="no .*robots/robot2/simulator/client.json5 nor"):
+        specs_for("--router", "--secure", str(on_robot), "--namespace", "robot2", "--services", "simulator")

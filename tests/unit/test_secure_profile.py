@@ -1,5 +1,6 @@
 """balltrack secure init: the files, their modes, the certificates and the access rules."""
 
+import argparse
 import ipaddress
 import json
 import stat
@@ -12,8 +13,9 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from balltrack.cli import main
 from balltrack.common import keys as key_table
 from balltrack.common.keys import SERVICES
-from balltrack.common.session import load_config_file
-from balltrack.deploy.secure import ROLES, ProfileError, access_control, init_profile, parse_hosts, permissions
+from balltrack.common.session import load_config_file, secure_client_path, served_namespace
+from balltrack.deploy.secure import (FLEET_ROLES, ROBOT_ROLES, ROLES, ProfileError, access_control, init_profile,
+                                     parse_hosts, parse_robots, permissions)
 
 
 @pytest.fixture(scope="module")
@@ -224,3 +226,123 @@ def test_renew_refuses_a_host_of_a_profile_without_link_certificates(tmp_path, c
     (tmp_path / "p" / "a" / "router-link.pem").unlink()
     assert main(["secure", "renew", str(tmp_path / "p"), "a"]) == 2
     assert "no router-link.pem" in capsys.readouterr().err
+
+
+# -- a fleet (--robots) -----------------------------------------------------------------------
+ROBOTS = ["robot1", "robot2"]
+
+
+def test_a_fleets_robot_roles_reach_only_their_own_namespace():
+    acl = access_control("", [], ROBOTS)
+    rules = {rule["id"]: rule for rule in acl["rules"]}
+    subjects = {subject["id"]: subject for subject in acl["subjects"]}
+    robot_roles = [f"{role}@{robot}" for robot in ROBOTS for role in ROBOT_ROLES]
+    assert list(subjects) == [*FLEET_ROLES, *robot_roles]
+    assert set(FLEET_ROLES) == {"detector", "locator", "follower", "viewer", "operator"}
+    # (no fleet-wide frame source: one runs per robot; a robot's viewer watches it alone)
+    assert set(ROBOT_ROLES) == {*SERVICES, "viewer"}
+    assert subjects["follower@robot1"] == {"id": "follower@robot1", "cert_common_names": ["balltrack follower@robot1"],
+                                           "usernames": ["follower@robot1"]}
+    for policy in acl["policies"]:
+        name = policy["subjects"][0]
+        assert policy["subjects"] == [name] and name in subjects
+        keys = [key for rule in policy["rules"] for key in rules[rule]["key_exprs"]
+                if not rule.endswith("put matching")]  # (that someone listens, never what is said)
+        if "@" in name:
+            robot = name.split("@")[1]
+            assert all(key.startswith(f"{robot}/") for key in keys), (name, keys)
+        else:  # fleet-wide: every robot's keys, the admin space, every robot's tokens
+            assert all(key.startswith(("robot1/", "robot2/", "@/", "**/alive/")) for key in keys), (name, keys)
+            assert any(key.startswith("robot1/") for key in keys) and any(key.startswith("robot2/") for key in keys)
+    assert rules["follower@robot1 put"]["key_exprs"] == ["robot1/cmd_vel", "robot1/follower/stats"]
+    assert rules["detector@robot1 subscribe"]["key_exprs"] == ["robot1/camera/image_raw"]
+    assert rules["simulator@robot2 answer"]["key_exprs"] == ["robot2/camera/camera_info", "robot2/sim/control",
+                                                            "robot2/simulator/config"]
+    assert rules["simulator@robot2 watch"]["key_exprs"] == ["robot2/alive/*"]
+    assert rules["operator put"]["key_exprs"] == ["robot1/cmd_vel", "robot2/cmd_vel"]
+    assert rules["viewer subscribe"]["key_exprs"] == ["robot1/**", "robot2/**"]
+    assert rules["viewer watch"]["key_exprs"] == rules["operator watch tokens"]["key_exprs"] == ["**/alive/*"]
+    assert rules["locator token"]["key_exprs"] == ["robot1/alive/locator", "robot2/alive/locator"]
+    # A robot's viewer: its robot's keys and tokens, not the admin space (every robot's keys).
+    assert [rule for rule in rules if rule.startswith("viewer@robot1")] == [
+        "viewer@robot1 subscribe", "viewer@robot1 subscribe delivery", "viewer@robot1 watch",
+        "viewer@robot1 watch tokens"]
+    assert rules["viewer@robot1 watch"]["key_exprs"] == ["robot1/alive/*"]
+    # Without --robots, the rules as they were.
+    assert access_control("ns")["subjects"] == [{"id": role, "cert_common_names": [f"balltrack {role}"],
+                                                 "usernames": [role]} for role in ROLES]
+
+
+def test_a_fleet_profile_writes_each_robots_credentials(tmp_path):
+    directory = tmp_path / "fleet"
+    init_profile(directory, ["a"], robots=ROBOTS)
+    users = dict(line.split(":", 1) for line in (directory / "a" / "users.txt").read_text().splitlines())
+    assert set(users) == {*FLEET_ROLES, *(f"{role}@{robot}" for robot in ROBOTS for role in ROBOT_ROLES)}
+    assert not (directory / "simulator").exists()
+    folder = directory / "robots" / "robot1" / "follower"
+    assert common_name(certificate(folder / "follower.pem")) == "balltrack follower@robot1"
+    assert users["follower@robot1"] == (folder / "password").read_text().strip() != users["follower"]
+    config = load_config_file(folder / "client.json5")
+    assert config.get_json("transport/auth/usrpwd/user") == '"follower@robot1"'
+    certificate_path = config.get_json("transport/link/tls/connect_certificate")
+    assert certificate_path == json.dumps(str(folder.resolve() / "follower.pem"))
+    assert mode(folder / "follower.key") == mode(folder / "password") == mode(folder / "client.json5") == 0o600
+    router = "".join(line for line in (directory / "a" / "router.json5").read_text().splitlines(True)
+                     if not line.startswith("//"))  # (its header)
+    assert json.loads(router)["access_control"] == access_control("", [], ROBOTS)
+    # --force without --robots: no robot's credentials left beside the new profile
+    init_profile(directory, ["a"], force=True)
+    assert not (directory / "robots").exists() and (directory / "simulator" / "client.json5").is_file()
+
+
+@pytest.mark.parametrize("robots, reason", [
+    ("", "empty name"), ("robot1,robot1", "'robot1' is listed twice"), ("robot1,,robot2", "empty name"),
+    ("r*", "may not contain"), ("a:b", "a robot's name is"), ("fleet/robot1", "a robot's name is")])
+def test_bad_robot_lists_are_one_line_errors(robots, reason, tmp_path, capsys):
+    with pytest.raises(ProfileError, match=reason):
+        parse_robots(robots)
+    assert main(["secure", "init", str(tmp_path / "p"), "--hosts", "a", "--robots", robots]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and reason in error, error
+    assert not (tmp_path / "p").exists()
+
+
+@pytest.mark.parametrize("arguments, reason", [
+    (["--hosts", "a", "--namespace", "site"], "no --namespace with it"),
+    (["--hosts", "robots"], "'robots' is the folder of the robots' credentials")])
+def test_robots_with_a_namespace_or_a_host_named_robots_are_refused(arguments, reason, tmp_path, capsys):
+    assert main(["secure", "init", str(tmp_path / "p"), *arguments, "--robots", "robot1"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and reason in error, error
+
+
+def test_a_process_serving_one_robot_uses_its_credentials(tmp_path):
+    directory = tmp_path / "fleet"
+    init_profile(directory, ["a"], robots=ROBOTS)
+    assert secure_client_path(directory, "follower", "robot1") == directory / "robots/robot1/follower/client.json5"
+    # a robot the profile lacks, a fleet-wide command role, no robot: the fleet-wide credentials
+    for role, namespace in (("follower", "robot3"), ("operator", "robot1"), ("follower", ""), ("follower", "..")):
+        assert secure_client_path(directory, role, namespace) == directory / role / "client.json5"
+    with pytest.raises(ValueError, match="no .*robots/robot1/simulator/client.json5 nor .*simulator/client.json5"):
+        secure_client_path(tmp_path / "elsewhere", "simulator", "robot1")
+    served = lambda **options: served_namespace(argparse.Namespace(**options))  # noqa: E731
+    assert served(namespace="/robot1/") == served(namespaces=["robot1"], namespace="") == "robot1"
+    assert served(namespaces=["robot1", "robot2"], namespace="") == ""
+    assert served(namespaces=[], discover_robots=True, namespace="") == ""
+    assert served(namespace=None) == ""  # (play's, unless given)
+
+
+def test_renew_replaces_one_robots_role(tmp_path, capsys):
+    directory = tmp_path / "fleet"
+    init_profile(directory, ["a"], robots=ROBOTS)
+    files = {path: path.read_bytes() for path in directory.rglob("*") if path.is_file()}
+    assert main(["secure", "renew", str(directory), "follower@robot1"]) == 0
+    changed = {path.relative_to(directory).as_posix() for path, data in files.items() if path.read_bytes() != data}
+    assert changed == {f"robots/robot1/follower/{name}" for name in ("follower.pem", "follower.key", "password",
+                                                                      "client.json5")} | {"a/users.txt"}
+    password = (directory / "robots" / "robot1" / "follower" / "password").read_text().strip()
+    assert users(directory / "a" / "users.txt")["follower@robot1"] == password
+    capsys.readouterr()
+    for name in ("follower@robot3", "operator@robot1", "follower@"):
+        assert main(["secure", "renew", str(directory), name]) == 2
+        assert capsys.readouterr().err.count("\n") == 1
