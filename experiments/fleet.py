@@ -259,6 +259,18 @@ def measure(robots: int, folder: Path, window: float, grace: float) -> dict:
     return row
 
 
+def failed_row(robots: int, error: str) -> dict:
+    """The row of a robot count whose system did not start, or whose robots were not all located."""
+    names = [robot_name(index + 1) for index in range(robots)]
+    return {"robots": {name: {"p50_ms": None, "p99_ms": None, "positions": 0, "frames_per_s": None,
+                              "dropped_share": None} for name in names},
+            "p50_ms": None, "p99_ms": None, "worst_p99_ms": None, "dropped_share": None, "messages_per_s": None,
+            "real_time_factor": None, "seconds": 0.0, "cpu_seconds": dict.fromkeys(PROCESSES),
+            "observer_cpu_seconds": None, "cores_used": None, "cpu_per_robot_second": None,
+            "rss_mb": dict.fromkeys(PROCESSES), "rss_total_mb": None, "reached": 0,
+            "reached_at": dict.fromkeys(names), "closest_m": dict.fromkeys(names), "error": error}
+
+
 def run(options: Options) -> ExperimentResult:
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="zenoh", quick=options.quick)
@@ -268,7 +280,12 @@ def run(options: Options) -> ExperimentResult:
     rows: dict[int, dict] = {}
     with tempfile.TemporaryDirectory(prefix="balltrack-fleet-") as folder:
         for robots in ROBOT_COUNTS:
-            rows[robots] = measure(robots, Path(folder) / f"robots_{robots}", window, grace)
+            try:
+                rows[robots] = measure(robots, Path(folder) / f"robots_{robots}", window, grace)
+            except RuntimeError as error:  # (a system that did not start or locate: that N is not served)
+                print(f"[fleet] {robots} robots: {error}", flush=True)
+                rows[robots] = failed_row(robots, str(error))
+                continue
             row = rows[robots]
             print(f"[fleet] {robots} robots: real time x{_text(row['real_time_factor'], '.2f')}, "
                   f"p50 {_text(row['p50_ms'], '.1f')} ms, worst p99 {_text(row['worst_p99_ms'], '.1f')} ms, "
@@ -306,9 +323,10 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
                  [[robots, _text(row["real_time_factor"], ".2f"),
                    f"{_text(row['p50_ms'], '.1f')} / {_text(row['p99_ms'], '.1f')}",
                    _text(row["worst_p99_ms"], ".1f"), _text(row["dropped_share"], ".1%"),
-                   f"{row['cpu_per_robot_second']:.3f}", f"{row['cores_used']:.2f}", f"{row['rss_total_mb']:.0f}",
-                   f"{row['messages_per_s']:.0f}", f"{row['reached']}/{robots}",
-                   "yes" if in_real_time(row) else "no"] for robots, row in rows.items()],
+                   _text(row["cpu_per_robot_second"], ".3f"), _text(row["cores_used"], ".2f"),
+                   _text(row["rss_total_mb"], ".0f"), _text(row["messages_per_s"], ".0f"), f"{row['reached']}/{robots}",
+                   "yes" if in_real_time(row) else f"no: {row['error']}" if "error" in row else "no"]
+                  for robots, row in rows.items()],
                  f"Per robot count, a window of {window:g} s after every robot was located; CPU and memory "
                  "of the router, the simulator and the pipeline process (cores used: their CPU seconds "
                  f"per second, of the machine's {os.cpu_count()}); messages as received by one subscriber of ** "

@@ -7,7 +7,8 @@ import pytest
 
 from balltrack.common.messages import encode, header
 from balltrack.experiments import cli
-from balltrack.experiments.fleet import FleetObserver, in_real_time, max_robots
+from balltrack.experiments.base import ExperimentResult
+from balltrack.experiments.fleet import FleetObserver, failed_row, in_real_time, max_robots, report, window_figures
 
 
 def frame(seq: int) -> bytes:
@@ -98,3 +99,20 @@ def test_the_fleet_experiment_is_registered():
     options = cli.parse(["fleet", "--quick", "--out", "/tmp/unused-fleet-out"])
     assert options.name == "fleet" and options.quick
     assert "fleet" in cli.EXPERIMENTS
+
+
+def test_a_robot_count_that_failed_is_reported_as_not_in_real_time(tmp_path):
+    measured = window_figures({"robot1": {"lags": [0.004] * 20, "frames": 30, "stats_before": None,
+                                          "stats_after": {"dropped": 0, "received": 30}}},
+                              messages=260, clock=[(0.0, 0), (2.0, 2_000_000_000)], seconds=2.0)
+    # (a served row: the window's figures over a failed row's, for the process figures not made here)
+    served = {**failed_row(1, ""), **measured, "cpu_per_robot_second": 0.1, "reached": 1}
+    del served["error"]
+    result = ExperimentResult("fleet", "test")
+    report(result, {1: served, 2: failed_row(2, "not every robot located in 120 s")}, 8.0, tmp_path)
+    assert result.figures["fleet/max_robots"] == 1
+    assert result.figures["fleet/robots_2/real_time_factor"] is None
+    assert result.figures["fleet/robots_1/robot1/p99_ms"] == pytest.approx(4.0)
+    assert "no: not every robot located in 120 s" in result.tables[0]
+    assert {goal.name: goal.passed for goal in result.goals} == {"fleet/max_robots": False, "fleet/reached": True}
+    assert (tmp_path / "fleet.png").stat().st_size > 1000
