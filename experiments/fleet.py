@@ -297,6 +297,11 @@ def run(options: Options) -> ExperimentResult:
     return result
 
 
+def per_second(cpu: float | None, seconds: float) -> float | None:
+    """CPU seconds per second (None when not measured)."""
+    return None if cpu is None or not seconds else round(cpu / seconds, 4)
+
+
 def _text(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
@@ -309,6 +314,7 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
                      "messages_per_s", "cpu_per_robot_second", "cores_used", "observer_cpu_seconds",
                      "rss_total_mb", "reached"):
             result.figure(f"{prefix}/{name}", row[name])
+        result.figure(f"{prefix}/window_s", row["seconds"])
         for process in PROCESSES:
             result.figure(f"{prefix}/cpu_seconds/{process}", row["cpu_seconds"][process])
             result.figure(f"{prefix}/rss_mb/{process}", row["rss_mb"][process])
@@ -329,8 +335,13 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
                   for robots, row in rows.items()],
                  f"Per robot count, a window of {window:g} s after every robot was located; CPU and memory "
                  "of the router, the simulator and the pipeline process (cores used: their CPU seconds "
-                 f"per second, of the machine's {os.cpu_count()}); messages as received by one subscriber of ** "
-                 "(frames included):")
+                 f"per second, of the machine's {os.cpu_count()}); messages as received by one "
+                 "subscriber of ** (frames included):")
+    result.table(["robots", *[f"{process} CPU s per robot-second" for process in PROCESSES],
+                  "this program's CPU s per second"],
+                 [[robots, *[per_second(row["cpu_seconds"][process], row["seconds"] * robots) for process in PROCESSES],
+                   per_second(row["observer_cpu_seconds"], row["seconds"])] for robots, row in rows.items()],
+                 "Where the CPU goes (this program, which takes every message, is not counted above):")
     result.table(["robots", *[f"robot{index} p50 / p99 (ms)" for index in range(1, 5)], "..."],
                  [[robots, *[f"{_text(figures['p50_ms'], '.1f')} / {_text(figures['p99_ms'], '.1f')}"
                              for figures in list(row["robots"].values())[:4]]
