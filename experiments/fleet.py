@@ -228,8 +228,9 @@ def measure(robots: int, folder: Path, window: float, grace: float) -> dict:
                 return observer.located()
 
             if not poll_until(located, LOCATED_TIMEOUT, interval=0.1):
-                raise RuntimeError(f"{robots} robots: not every robot located in {LOCATED_TIMEOUT:.0f} s "
-                                   f"(see {folder})")
+                # (the run folder goes with the experiment's temporary folder: the logs' ends here)
+                raise RuntimeError(f"not every robot located in {LOCATED_TIMEOUT:.0f} s; simulator: "
+                                   f"{system.log('simulator', 3)!r}; pipeline: {pipeline.output()[-300:]!r}")
             pids = {"router": system.pid("router"), "simulator": system.pid("simulator"), "pipeline": pipeline.pid}
             stats_before = observer.window_start()
             cpu_before = {name: cpu_seconds(pid) for name, pid in pids.items()}
@@ -315,6 +316,8 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
                      "rss_total_mb", "reached"):
             result.figure(f"{prefix}/{name}", row[name])
         result.figure(f"{prefix}/window_s", row["seconds"])
+        if "error" in row:
+            result.figure(f"{prefix}/error", row["error"])
         for process in PROCESSES:
             result.figure(f"{prefix}/cpu_seconds/{process}", row["cpu_seconds"][process])
             result.figure(f"{prefix}/rss_mb/{process}", row["rss_mb"][process])
@@ -322,6 +325,7 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
             for name, value in figures.items():
                 result.figure(f"{prefix}/{robot}/{name}", value)
             result.figure(f"{prefix}/{robot}/reached_at_s", row["reached_at"][robot])
+            result.figure(f"{prefix}/{robot}/closest_m", row["closest_m"][robot])
     best = result.figure("max_robots", max_robots(rows))
     result.table(["robots", "real-time factor", "3D p50 / p99 (ms, all robots)", "worst robot's p99 (ms)",
                   "frames dropped", "CPU s per robot-second", "cores used", "resident memory (MB, total)",
@@ -331,7 +335,7 @@ def report(result: ExperimentResult, rows: dict[int, dict], window: float, out: 
                    _text(row["worst_p99_ms"], ".1f"), _text(row["dropped_share"], ".1%"),
                    _text(row["cpu_per_robot_second"], ".3f"), _text(row["cores_used"], ".2f"),
                    _text(row["rss_total_mb"], ".0f"), _text(row["messages_per_s"], ".0f"), f"{row['reached']}/{robots}",
-                   "yes" if in_real_time(row) else f"no: {row['error']}" if "error" in row else "no"]
+                   "yes" if in_real_time(row) else f"no: {row['error'].split(';')[0]}" if "error" in row else "no"]
                   for robots, row in rows.items()],
                  f"Per robot count, a window of {window:g} s after every robot was located; CPU and memory "
                  "of the router, the simulator and the pipeline process (cores used: their CPU seconds "
