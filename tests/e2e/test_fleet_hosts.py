@@ -35,13 +35,15 @@ import time
 
 import pytest
 
+from balltrack.services.simulator.fleet import robot_names
 from tests.harness import Process
 from tests.integration.test_multihost import STARTUP, launch, network, wait_until  # noqa: F401
 from tests.integration.test_partition import records
 
 pytestmark = [pytest.mark.netns, pytest.mark.slow]
 
-HOSTS = {"a": range(1, 5), "b": range(5, 9)}   # the robots each simulator holds
+ROBOTS_PER_HOST = 4
+HOSTS = {"a": 1, "b": 5}   # the first robot of each host's simulator
 LOCATOR_HOST = "c"
 CUT_HOST = "b"
 # 320x240 at 10 Hz: eight robots' renders and detections fit two busy cores.
@@ -101,10 +103,6 @@ session.close()
 """
 
 
-def robot_names(robots) -> list[str]:
-    return [f"robot{robot}" for robot in robots]
-
-
 def settled(probe: Process, robots: list[str]) -> bool:
     """Whether each of ``robots`` has stood still for its last SETTLED commands (it reached its
     ball): while a robot drives up to its ball, the ball grows in its frames and its detection
@@ -127,7 +125,7 @@ def gone_after(probe: Process, host_robots: list[str], moment: float) -> dict[st
 
 
 def all_gone(gone: dict[str, float]) -> dict[str, float] | None:
-    return gone if len(gone) == SERVICES_PER_ROBOT * len(HOSTS[CUT_HOST]) else None
+    return gone if len(gone) == SERVICES_PER_ROBOT * ROBOTS_PER_HOST else None
 
 
 def positions_after(probe: Process, robots: list[str], moment: float) -> dict[str, list[float]]:
@@ -181,17 +179,17 @@ def test_a_cut_host_stops_its_robots_only_and_they_resume_after_the_heal(network
     for router in routers.values():
         router.wait_for_output("listening on", STARTUP)
 
-    names = {host: robot_names(robots) for host, robots in HOSTS.items()}
+    names = {host: robot_names(ROBOTS_PER_HOST, first) for host, first in HOSTS.items()}
     everyone = names["a"] + names["b"]
     processes = list(routers.values())
     probes = {}
-    for host, robots in HOSTS.items():
+    for host, first in HOSTS.items():
         connect = ["--connect", endpoints[host]]
         probes[host] = launch(host, "probe", ["-c", PROBE, endpoints[host], ",".join(names[host]),
                                               ",".join(everyone if host == "a" else names[host])])
         processes.append(launch(host, "simulator", ["-m", "balltrack.services.simulator", *connect, *SIMULATOR,
-                                                    "--set", f"robots={len(robots)}",
-                                                    "--set", f"first_robot={robots[0]}"]))
+                                                    "--set", f"robots={ROBOTS_PER_HOST}",
+                                                    "--set", f"first_robot={first}"]))
         processes.append(launch(host, "detector+follower", ["-m", "balltrack", "run", "detector+follower",
                                                             *connect, "--namespaces", ",".join(names[host])]))
     processes.append(launch(LOCATOR_HOST, "locator", ["-m", "balltrack.services.locator", "--connect",
