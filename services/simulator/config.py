@@ -41,6 +41,10 @@ class SimulatorConfig:
                            "`robot1`..`robotN`, each on its own keys (`robotK/cmd_vel`, "
                            "`robotK/camera/image_raw`, `robotK/sim/ground_truth`, `robotK/clock`...)",
                         low=1, high=64, off=0)
+    # Two simulators on two hosts, each holding part of one fleet, give their robots distinct
+    # names (and keys) this way: robots = 4 and first_robot = 5 are robot5..robot8.
+    first_robot: int = param(1, "with robots >= 1, the number of the first robot: robots `robot<first_robot>` "
+                                "onwards (their own balls `tennis<first_robot>`...)", low=1, high=10000)
     width: int = param(640, "camera image width (px)", low=16, high=4096)
     height: int = param(480, "camera image height (px)", low=16, high=4096)
     # Gazebo's default.
@@ -97,6 +101,9 @@ class SimulatorConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.first_robot != 1 and self.robots == 0:
+            raise ConfigError(f"first_robot: numbers the robots of robots >= 1; with robots = 0 the one "
+                              f"robot is on the service's own keys, got first_robot = {self.first_robot}")
         if not self.scenario.strip():
             raise ConfigError("scenario: must name a scenario or a .toml file")
         if self.vfov >= math.radians(175):
@@ -114,7 +121,7 @@ class SimulatorConfig:
         from balltrack.services.simulator.scenario import load_scenario
 
         # (ConfigError naming the file and the problem, or the robots that do not fit in it)
-        fleet_layout(load_scenario(self.scenario), self.robots)
+        fleet_layout(load_scenario(self.scenario), self.robots, self.first_robot)
 
     @property
     def vfov(self) -> float:

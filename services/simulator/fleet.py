@@ -9,6 +9,8 @@ The simulator's ``robots`` setting says how many robots its world holds:
   ``robotK`` under the service's namespace: ``balltrack run simulator --namespace site --set
   robots=2`` serves ``site/robot1/cmd_vel``, ``site/robot2/camera/image_raw``... Each robot's
   elements in the model carry its name (body ``robot2``, camera ``robot2_front``).
+  ``first_robot`` numbers them from another robot than 1 (``first_robot = 5``: ``robot5`` to
+  ``robot8`` for ``robots = 4``), so that simulators on several hosts hold distinct robots.
 
 The robots stand in rows (the scenario's ``[fleet]`` table), centred on the scenario's
 ``[robot]`` start and facing its yaw: ``columns`` per row, ``spacing`` metres apart, robot 1 on
@@ -38,10 +40,10 @@ def own_ball_id(robot: int) -> str:
     return f"tennis{robot}"
 
 
-def robot_names(robots: int) -> list[str]:
+def robot_names(robots: int, first: int = 1) -> list[str]:
     """The model name prefix of each robot for the ``robots`` setting: ``[""]`` for the single
-    robot of ``robots = 0``, else ``robot1`` to ``robotN``."""
-    return [""] if robots == 0 else [robot_name(index + 1) for index in range(robots)]
+    robot of ``robots = 0``, else ``robot<first>`` to ``robot<first + robots - 1>``."""
+    return [""] if robots == 0 else [robot_name(first + index) for index in range(robots)]
 
 
 @dataclass
@@ -69,8 +71,9 @@ def start_poses(scenario: Scenario, count: int) -> list[RobotStart]:
     return starts
 
 
-def own_balls(scenario: Scenario, starts: list[RobotStart]) -> list[BallSpec]:
-    """Each robot's own ball (none when the scenario's ``ball_distance`` is 0)."""
+def own_balls(scenario: Scenario, starts: list[RobotStart], first: int = 1) -> list[BallSpec]:
+    """Each robot's own ball (none when the scenario's ``ball_distance`` is 0), robot ``first``'s
+    first."""
     fleet = scenario.fleet
     if fleet.ball_distance <= 0:
         return []
@@ -79,13 +82,14 @@ def own_balls(scenario: Scenario, starts: list[RobotStart]) -> list[BallSpec]:
         cos_yaw, sin_yaw = math.cos(start.yaw), math.sin(start.yaw)
         x = start.x + fleet.ball_distance * cos_yaw - fleet.ball_offset * sin_yaw
         y = start.y + fleet.ball_distance * sin_yaw + fleet.ball_offset * cos_yaw
-        balls.append(BallSpec(id=own_ball_id(index + 1), position=(x, y, TENNIS_RADIUS)))
+        balls.append(BallSpec(id=own_ball_id(first + index), position=(x, y, TENNIS_RADIUS)))
     return balls
 
 
-def fleet_layout(scenario: Scenario, robots: int) -> FleetLayout:
-    """The robots and balls of ``scenario`` for the ``robots`` setting; ConfigError naming the
-    first robot or ball outside the world, or an own ball's id the scenario already uses."""
+def fleet_layout(scenario: Scenario, robots: int, first: int = 1) -> FleetLayout:
+    """The robots and balls of ``scenario`` for the ``robots`` and ``first_robot`` settings;
+    ConfigError naming the first robot or ball outside the world, or an own ball's id the
+    scenario already uses."""
     if robots == 0:  # (one robot, as the scenario says; its own ball, if any, is tennis1)
         starts = [scenario.robot]
     else:
@@ -94,10 +98,10 @@ def fleet_layout(scenario: Scenario, robots: int) -> FleetLayout:
     limit = scenario.robot_limit
     for index, start in enumerate(starts):
         if abs(start.x) > limit or abs(start.y) > limit:
-            raise ConfigError(f"{where}: robot {index + 1} would start at ({start.x:.3g}, "
+            raise ConfigError(f"{where}: robot {first + index} would start at ({start.x:.3g}, "
                               f"{start.y:.3g}), outside the world (|x|, |y| <= {limit:g}); fewer "
                               f"robots, more columns or a larger world")
-    balls = own_balls(scenario, starts)
+    balls = own_balls(scenario, starts, first)
     ids = {ball.id for ball in scenario.balls}
     for ball in balls:
         x, y, _ = ball.position
@@ -110,11 +114,11 @@ def fleet_layout(scenario: Scenario, robots: int) -> FleetLayout:
     return FleetLayout(starts=starts, balls=scenario.balls + balls)
 
 
-def own_ball_referees(robots: int, **criteria) -> dict[str, Referee]:
+def own_ball_referees(robots: int, first: int = 1, **criteria) -> dict[str, Referee]:
     """One :class:`common.referee.Referee` per robot, judging whether it reached its own ball,
     keyed by the robot's namespace (``""`` for the single robot of ``robots = 0``)."""
-    return {name: Referee(target=own_ball_id(index + 1), **criteria)
-            for index, name in enumerate(robot_names(robots))}
+    return {name: Referee(target=own_ball_id(first + index), **criteria)
+            for index, name in enumerate(robot_names(robots, first))}
 
 
 def robot_key(robot: str, key: str) -> str:

@@ -128,7 +128,7 @@ def build(service: ServiceContext):
     # Each frame's message is a new megabyte: kept, not faulted in again (common/memory.py).
     keep_freed_memory()
     links = [RobotLinks.declare(service, index, name)
-             for index, name in enumerate(robot_names(service.config.robots))]
+             for index, name in enumerate(robot_names(service.config.robots, service.config.first_robot))]
     if service.config.robots:
         # Each robot's namespace has its frame source alive, as a robot with its own camera
         # would: how a process serving many robots finds them (`--namespaces auto`).

@@ -101,12 +101,12 @@ class Simulation:
     def _load(self, scenario: Scenario, start_time: float) -> None:
         """Build model, data and renderer for ``scenario`` (the only place they are created)."""
         config = self.config
-        layout = fleet_layout(scenario, config.robots)  # ConfigError if the robots do not fit
+        layout = fleet_layout(scenario, config.robots, config.first_robot)  # ConfigError if the robots do not fit
         # The world's scenario: the file's, with the robots' own balls if it gives them.
         scenario = dataclasses.replace(scenario, balls=layout.balls)
         model = mujoco.MjModel.from_xml_string(build_mjcf(scenario, config))
         data = mujoco.MjData(model)
-        names = robot_names(config.robots)
+        names = robot_names(config.robots, config.first_robot)
         camera = SimCamera(model, data, config, names)
         if self._camera is not None:
             self._camera.close()

@@ -241,7 +241,7 @@ def build_mjcf(scenario: Scenario, config: SimulatorConfig) -> str:
     top_height = half / math.tan(math.radians(22.5)) * 1.05
     lines.append(f'    <camera name="top" pos="0 0 {top_height:.6g}" xyaxes="1 0 0 0 1 0" '
                  'fovy="45"/>')
-    robots = robot_names(config.robots)
+    robots = robot_names(config.robots, config.first_robot)
     lines += [_robot(config, robot) for robot in robots]
     lines += [f"    {body}" for body in _balls(scenario)]
     lines += ['  </worldbody>', '  <actuator>']

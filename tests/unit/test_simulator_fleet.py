@@ -98,6 +98,31 @@ def test_names_and_keys_of_the_robots():
     assert [referee.target for referee in referees.values()] == ["tennis1", "tennis2"]
 
 
+def test_a_simulator_holding_part_of_a_fleet_numbers_its_robots_from_first_robot():
+    assert robot_names(3, first=5) == ["robot5", "robot6", "robot7"]
+    assert list(own_ball_referees(2, first=5)) == ["robot5", "robot6"]
+    scenario = load_scenario("fleet")
+    numbered, plain = fleet_layout(scenario, 4, first=5), fleet_layout(scenario, 4)
+    assert [ball.id for ball in numbered.balls] == [own_ball_id(robot) for robot in range(5, 9)]
+    # (the same rows as robots 1-4: each simulator is a world of its own)
+    assert numbered.starts == plain.starts
+    config = SimulatorConfig(scenario="fleet", robots=2, first_robot=5, **SMALL)
+    model = mujoco.MjModel.from_xml_string(build_mjcf(scenario, config))
+    assert {"robot5", "robot6"} <= model_names(model, "body", model.nbody)
+    assert "robot1" not in model_names(model, "body", model.nbody)
+    with Simulation(config) as simulation:
+        assert [ball["id"] for ball in simulation.ground_truth(1)["balls"] if ball["visible"]] == ["tennis6"]
+
+
+@pytest.mark.parametrize("setting, expected", [
+    (["first_robot=0", "robots=2"], "first_robot: must be"),
+    (["first_robot=5"], "first_robot: numbers the robots of robots >= 1"),
+])
+def test_bad_first_robot_setting_is_refused(setting, expected):
+    with pytest.raises(ConfigError, match=expected):
+        load_config(SimulatorConfig, None, setting, section="simulator")
+
+
 @pytest.mark.parametrize("scenario, robots, expected", [
     ("chase", 64, "robots: 64 in scenario 'chase': robot 1 would start at"),
     ("fleet", 24, "robots: 24 in scenario 'fleet': robot 1 would start at"),
