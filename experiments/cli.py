@@ -35,7 +35,8 @@ from balltrack.experiments.base import (PHOTOS_DEFAULT_TEXT, PHOTOS_VARIABLE, SH
 from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
-               "distractors", "real_photos", "detector_speed", "colour_setting", "latency", "fuzz", "soak", "fleet")
+               "distractors", "real_photos", "detector_speed", "colour_setting", "latency", "live_view", "fuzz", "soak",
+               "fleet")
 TRANSPORTS = ("auto", "in-process", "zenoh")
 
 
