@@ -17,6 +17,7 @@ Example::
 """
 
 import io
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -70,6 +71,7 @@ class PageWatcher:
     def __init__(self, browser):
         self.browser = browser
         self.screenshot_seconds: list[float] = []
+        self.last = None  # the last screenshot
 
     def wait_for(self, condition, timeout: float) -> float | None:
         """Seconds until a screenshot satisfies ``condition`` (counted to the screenshot's
@@ -83,12 +85,16 @@ class PageWatcher:
             picture = self.browser.screenshot(clip=FRAME_CLIP, scale=0.25, image_format="jpeg")
             after = time.monotonic()
             self.screenshot_seconds.append(after - before)
+            if picture is not None:
+                self.last = picture
             return (after - started) if picture is not None and condition(picture) else None
 
         return poll_until(shown, timeout, interval=0.0)
 
 
 def run(options) -> "ExperimentResult":
+    import cv2
+
     from balltrack.common.network import free_port
     from balltrack.common.session import open_session
     from balltrack.deploy.command import Command
@@ -113,7 +119,7 @@ def run(options) -> "ExperimentResult":
         session = open_session([system.endpoint], open_timeout=10)
         viewer = Command(["view", "--connect", system.endpoint, "--port", str(free_port()),
                           "--grpc-port", str(free_port())], folder / "viewer.log")
-        browser = None
+        browser = watcher = None
         try:
             url = viewer.wait_for(r"Rerun viewer on (\S+)").group(1)
             profile = Path(scratch) / "chromium"
@@ -134,6 +140,8 @@ def run(options) -> "ExperimentResult":
                 if not reply["ok"]:
                     raise RuntimeError(f"set_light: {reply.get('error')}")
                 shown = watcher.wait_for(condition, CHANGE_WAIT)
+                print(f"[{NAME}] change {index + 1}/{changes} ({'dark' if light is DARK else 'lit'}): "
+                      + ("not seen" if shown is None else f"{shown:.2f} s"), file=sys.stderr, flush=True)
                 if shown is None:
                     missed += 1
                     # (the page is behind by more than CHANGE_WAIT: the later changes would
@@ -145,6 +153,11 @@ def run(options) -> "ExperimentResult":
             result.figure("browser_cpu_percent", 100 * (tree_cpu_seconds(browser.popen.pid) - browser_cpu) / elapsed)
         finally:
             if browser is not None:
+                # (what the page showed last, to see why a change was not seen)
+                page = browser.screenshot()
+                for picture, name in ((page, "page.png"), (watcher and watcher.last, "frame_part.png")):
+                    if picture is not None:
+                        cv2.imwrite(str(folder / name), picture)
                 browser.stop()
             viewer.stop()
             session.close()
