@@ -126,16 +126,18 @@ def run(options) -> "ExperimentResult":
             profile = Path(scratch) / "chromium"
             profile.mkdir()
             browser = Chromium(profile, folder / "chromium.log", *WINDOW)
-            page_opened = time.monotonic()
             browser.open(url)
             watcher = PageWatcher(browser)
-            if watcher.wait_for(looks_lit, PAGE_WAIT) is None:
-                raise RuntimeError(f"the page showed no camera picture in {PAGE_WAIT:g} s "
-                                   f"(see {folder / 'viewer.log'})")
-            result.figure("first_picture_s", time.monotonic() - page_opened)
-            viewer_cpu, browser_cpu = cpu_seconds(viewer.pid), tree_cpu_seconds(browser.popen.pid)
-            watching = time.monotonic()
-            for index in range(changes):
+
+            def costs() -> tuple[float, float, float]:
+                return time.monotonic(), cpu_seconds(viewer.pid), tree_cpu_seconds(browser.popen.pid)
+
+            start = costs()
+            first_picture = watcher.wait_for(looks_lit, PAGE_WAIT)
+            result.figure("first_picture_s", first_picture)
+            if first_picture is not None:  # (else the CPU while the page was loading)
+                start = costs()
+            for index in range(changes if first_picture is not None else 0):
                 light, condition = (DARK, looks_dark) if index % 2 == 0 else (LIT, looks_lit)
                 reply = send_command(session, {"op": "set_light", **light})
                 if not reply["ok"]:
@@ -149,9 +151,9 @@ def run(options) -> "ExperimentResult":
                     # measure the same backlog)
                     break
                 seconds.append(shown)
-            elapsed = time.monotonic() - watching
-            result.figure("viewer_cpu_percent", 100 * (cpu_seconds(viewer.pid) - viewer_cpu) / elapsed)
-            result.figure("browser_cpu_percent", 100 * (tree_cpu_seconds(browser.popen.pid) - browser_cpu) / elapsed)
+            end = costs()
+            result.figure("viewer_cpu_percent", 100 * (end[1] - start[1]) / (end[0] - start[0]))
+            result.figure("browser_cpu_percent", 100 * (end[2] - start[2]) / (end[0] - start[0]))
         finally:
             if browser is not None:
                 # (what the page showed last, to see why a change was not seen)
@@ -177,20 +179,23 @@ def run(options) -> "ExperimentResult":
     def text(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f} s"
 
+    if first_picture is None:
+        achieved = f"the page showed no camera picture in {PAGE_WAIT:g} s"
+    else:
+        achieved = (f"{text(p50)} / {text(p99)} ({len(seconds)} of {changes} changes seen"
+                    + (f", then none in {CHANGE_WAIT:g} s" if missed else "") + ")")
     result.goal("change_shown", f"a change of light in the world shows in Rerun's web page (headless Chromium, "
                                 f"software WebGL) within p50 <= {GOAL_P50_S:g} s and p99 <= {GOAL_P99_S:g} s, "
                                 "every change seen",
-                f"<= {GOAL_P50_S:g} / {GOAL_P99_S:g} s",
-                f"{text(p50)} / {text(p99)} ({len(seconds)} of {changes} changes seen"
-                + (f", then none in {CHANGE_WAIT:g} s" if missed else "") + ")",
+                f"<= {GOAL_P50_S:g} / {GOAL_P99_S:g} s", achieved,
                 not missed and p50 is not None and p50 <= GOAL_P50_S and p99 <= GOAL_P99_S)
     figures = result.figures
-    result.table(["changes seen", "p50", "p99", "max", "screenshot p50", "viewer CPU", "browser CPU"],
-                 [[f"{len(seconds)} / {changes}", text(p50), text(p99), text(figures[f'{NAME}/max_s']),
+    result.table(["first picture", "changes seen", "p50", "p99", "max", "screenshot p50", "viewer CPU", "browser CPU"],
+                 [[text(first_picture), f"{len(seconds)} / {changes}", text(p50), text(p99), text(figures[f'{NAME}/max_s']),
                    text(figures[f"{NAME}/screenshot_p50_s"]),
                    f"{figures[f'{NAME}/viewer_cpu_percent']:.0f} %", f"{figures[f'{NAME}/browser_cpu_percent']:.0f} %"]],
-                 "Light off / on in the simulator -> the page's annotated frame dark / lit (CPU in % of one core, "
-                 "while watching):")
+                 "Light off / on in the simulator -> the page's annotated frame dark / lit (first picture: "
+                 "page opened -> the camera's picture shown; CPU in % of one core, while watching):")
     if summary:
         result.notes.append(f"The viewer's own count: {summary.removeprefix('balltrack view: ')}")
     result.settings = {"system": f"scenario {SCENARIO}, 640x480 at 30 Hz, real time",
