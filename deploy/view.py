@@ -11,7 +11,9 @@ hand over: showing (JPEG encoding of a raw frame, logging) happens on a thread o
 keeps only the newest frame and a bounded queue of the rest, so a slow viewer drops (and counts,
 :attr:`Bridge.dropped`) rather than delaying the session's other callbacks, and drops what has
 waited over MAX_AGE rather than showing the past. Malformed messages
-are dropped and counted (:attr:`Bridge.rejected`).
+are dropped and counted (:attr:`Bridge.rejected`). The Rerun bridge's show_* methods only gather:
+a third thread sends what was gathered ``update_rate_hz`` times a second, so for it "shown"
+(:attr:`Bridge.lags`) means gathered for the next update.
 """
 
 import collections
