@@ -14,6 +14,7 @@ Needs ``chromium`` (deploy/setup.sh installs it) and ``websockets`` (the test ex
 """
 
 import base64
+import contextlib
 import json
 import shutil
 import subprocess
@@ -42,6 +43,7 @@ class Chromium:
         if CHROMIUM is None:
             raise RuntimeError("chromium is not installed (deploy/setup.sh installs it)")
         self.width, self.height = width, height
+        self._closing = contextlib.ExitStack()  # the DevTools connection, once open
         self._log = open(log_path, "wb")
         self.popen = subprocess.Popen(
             [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
@@ -62,7 +64,7 @@ class Chromium:
             port = int(port_file.read_text().split()[0])
             pages = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10))
             page = next(page["webSocketDebuggerUrl"] for page in pages if page["type"] == "page")
-            self._connection = connect(page, max_size=None)
+            self._connection = self._closing.enter_context(connect(page, max_size=None))
         except Exception:
             self.stop()
             raise
@@ -100,9 +102,7 @@ class Chromium:
         return cv2.imdecode(np.frombuffer(base64.b64decode(reply["result"]["data"]), np.uint8), cv2.IMREAD_COLOR)
 
     def stop(self) -> None:
-        connection = getattr(self, "_connection", None)
-        if connection is not None:
-            connection.close()
+        self._closing.close()
         if self.popen.poll() is None:
             self.popen.terminate()
             try:
