@@ -32,6 +32,7 @@ CONFIGS = (
     ("follower", "balltrack.services.follower.config", "FollowerConfig"),
     ("simulator", "balltrack.services.simulator.config", "SimulatorConfig"),
     ("camera", "balltrack.services.camera.config", "CameraConfig"),
+    ("view", "balltrack.deploy.view_config", "RerunViewConfig"),
 )
 
 INTRODUCTIONS = {
@@ -43,6 +44,8 @@ INTRODUCTIONS = {
     "simulator": "The MuJoCo world that stands in for the paper's Gazebo: camera, robot base, referee.",
     "camera": "Frames from a real camera, a video, photos or a stream, published as the simulator's are "
               "(see [Your own camera](../README.md#your-own-camera)).",
+    "view": "What `balltrack view` sends Rerun's web page (`balltrack view --set NAME=VALUE`): rates and "
+            "sizes a browser rendering in software keeps up with (see [Watching it live](running.md#watching-it-live)).",
 }
 
 

@@ -11,13 +11,17 @@ hand over: showing (JPEG encoding of a raw frame, logging) happens on a thread o
 keeps only the newest frame and a bounded queue of the rest, so a slow viewer drops (and counts,
 :attr:`Bridge.dropped`) rather than delaying the session's other callbacks, and drops what has
 waited over MAX_AGE rather than showing the past. Malformed messages
-are dropped and counted (:attr:`Bridge.rejected`).
+are dropped and counted (:attr:`Bridge.rejected`). The Rerun bridge's show_* methods only gather:
+a third thread sends what was gathered ``update_rate_hz`` times a second, so for it "shown"
+(:attr:`Bridge.lags`) means gathered for the next update.
 """
 
 import collections
+import math
 import threading
 import time
 
+import cv2
 import foxglove
 import rerun as rr
 from foxglove.channels import CompressedImageChannel, FrameTransformChannel, SceneUpdateChannel
@@ -28,6 +32,8 @@ from balltrack.common.messages import MessageError, decode
 from balltrack.deploy.foxglove_messages import (CMD_VEL_TOPIC, IMAGE_TOPIC, SCENE_TOPIC, TF_TOPIC, TWIST_SCHEMA,
                                                 compressed_image, jpeg_of, located_scene, robot_transform,
                                                 truth_scene, twist_json)
+from balltrack.deploy.view_config import RerunViewConfig
+from balltrack.services.detector.detector import shrunk_size
 
 LAGS_KEPT = 100_000
 # A live view shows the present: a queued message older than this (seconds) when its turn
@@ -169,7 +175,7 @@ class FoxgloveBridge(Bridge):
         self.cmd_vel.log(twist_json(twist))
 
 
-PATH_POINTS = 20_000  # the robot path kept for the line strip (over 10 min at 30 Hz)
+PATH_POINTS = 5_000  # the robot's path kept for the line strip, its oldest points dropped first
 RATE_WINDOW_NS = 1_000_000_000
 
 
@@ -178,65 +184,130 @@ SERIES_COLOURS = {"plots/located_balls_hz": (80, 150, 255), "plots/ball_distance
                   "plots/cmd_vel/linear_x": (230, 60, 200), "plots/cmd_vel/angular_z": (60, 200, 230)}
 
 
-def rerun_blueprint():
+def rerun_blueprint(config: RerunViewConfig | None = None):
     """The layout: the annotated frame large on the left; the world (true balls, the robot and
-    its path) and the time plots on the right."""
+    its path) and the time plots (the last ``plot_window_s`` of them) on the right."""
     import rerun.blueprint as rrb
 
+    config = config or RerunViewConfig()
+    window = rrb.VisibleTimeRange("sim_time", start=rrb.TimeRangeBoundary.cursor_relative(seconds=-config.plot_window_s),
+                                  end=rrb.TimeRangeBoundary.cursor_relative())
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial2DView(origin="camera", name="annotated frame"),
             rrb.Vertical(rrb.Spatial3DView(origin="world", name="world (ground truth)"),
-                         rrb.TimeSeriesView(origin="plots/cmd_vel", name="cmd_vel"),
+                         rrb.TimeSeriesView(origin="plots/cmd_vel", name="cmd_vel", time_ranges=window),
                          rrb.TimeSeriesView(origin="plots", contents=["$origin/located_balls_hz",
                                                                      "$origin/ball_distance_m"],
-                                            name="located balls")),
+                                            name="located balls", time_ranges=window)),
             column_shares=[3, 2]),
         collapse_panels=True)
 
 
 class RerunBridge(Bridge):
     """Logs balltrack's keys into the Rerun ``recording`` on the simulated-time timeline
-    ``sim_time``: the annotated frame (``camera/image``, BGR pixels), the true balls and the robot's position
-    and path in the world frame (``world/...``, from ground truth), cmd_vel and the rate of
-    located balls as time plots (``plots/...``)."""
+    ``sim_time``: the annotated frame (``camera/image``, BGR pixels, at most ``frame_width``
+    wide), the true balls and the robot's position and path in the world frame (``world/...``,
+    from ground truth), cmd_vel and the rate of located balls as time plots (``plots/...``).
 
-    def __init__(self, session, recording: rr.RecordingStream, namespace: str = "", jpeg_quality: int = 80):
+    What comes in is gathered, and sent ``update_rate_hz`` times a second all at once: the
+    newest frame and world, and every plot point since the last update (each at its own time).
+    A page paints once for each batch of data it receives, and one rendering in software (no
+    GPU) takes a large part of a second to paint at any size of data: fed as things come (a
+    frame, a world, a plot point, each at its own moment), it never finishes one paint before
+    the next is due, and shows each change only after several."""
+
+    def __init__(self, session, recording: rr.RecordingStream, namespace: str = "",
+                 config: RerunViewConfig | None = None):
         self.recording = recording
+        self.config = config or RerunViewConfig()
         self._path: collections.deque = collections.deque(maxlen=PATH_POINTS)
         self._located: collections.deque = collections.deque()  # stamps of the last second's balls
-        self._lock = threading.Lock()
+        # What the next update sends (under _pending): the newest frame and ground truth not
+        # sent yet, and each series' points (stamp in ns, value) since the last update.
+        self._pending = threading.Lock()
+        self._frame: dict | None = None
+        self._truth: dict | None = None
+        self._points: dict[str, list[tuple[int, float]]] = {path: [] for path in SERIES_COLOURS}
         for path, colour in SERIES_COLOURS.items():
             rr.log(path, rr.SeriesLines(colors=[colour], names=[path.rsplit("/", 1)[1]]), static=True,
                    recording=recording)
-        super().__init__(session, namespace, jpeg_quality)
+        self._stop_updates = threading.Event()
+        self._updater = threading.Thread(target=self._update_regularly, name="view-updates", daemon=True)
+        self._updater.start()
+        try:
+            super().__init__(session, namespace)
+        except Exception:
+            self._stop_updates.set()
+            raise
+
+    def _update_regularly(self) -> None:
+        while not self._stop_updates.wait(1.0 / self.config.update_rate_hz):
+            self.update()
+
+    def update(self) -> None:
+        """Send what was gathered since the last update."""
+        with self._pending:
+            frame, truth, self._frame, self._truth = self._frame, self._truth, None, None
+            points = {path: series for path, series in self._points.items() if series}
+            self._points = {path: [] for path in SERIES_COLOURS}
+            path = list(self._path)
+        if frame is not None:
+            self._show_frame(frame)
+        if truth is not None:
+            self._show_world(truth, path)
+        for series, values in points.items():
+            rr.send_columns(series, indexes=[rr.TimeColumn("sim_time", duration=[stamp / 1e9 for stamp, _ in values])],
+                            columns=rr.Scalars.columns(scalars=[value for _, value in values]),
+                            recording=self.recording)
+
+    def _show_frame(self, frame: dict) -> None:
+        try:
+            picture = image_to_bgr(frame)
+        except MessageError:  # pixels that do not match the message's size
+            self.rejected += 1
+            return
+        size = shrunk_size(picture.shape[1], picture.shape[0], self.config.frame_width)
+        if size is not None:
+            picture = cv2.resize(picture, size, interpolation=cv2.INTER_AREA)
+        self._at(frame["header"]["stamp"])
+        # Pixels, not JPEG (rr.EncodedImage): the web viewer decodes JPEG in the page, and one
+        # rendering in software showed its loading mark in place of every frame.
+        rr.log("camera/image", rr.Image(picture, color_model="BGR"), recording=self.recording)
 
     def _at(self, stamp: int) -> None:
-        # Rerun's time is per thread: set it before every log, as callbacks come from several.
         rr.set_time("sim_time", duration=stamp / 1e9, recording=self.recording)
 
     def show_image(self, image: dict) -> None:
-        # Pixels, not JPEG: the web viewer decodes JPEG in the page, which a browser without a
-        # GPU (software rendering) did not finish for minutes; a 320x240 frame is 230 kB.
-        self._at(image["header"]["stamp"])
-        rr.log("camera/image", rr.Image(image_to_bgr(image), color_model="BGR"), recording=self.recording)
+        with self._pending:
+            self.skipped_frames += self._frame is not None
+            self._frame = image
 
     def show_ball(self, ball: dict) -> None:
         stamp = ball["header"]["stamp"]
-        with self._lock:
-            self._located.append(stamp)
-            while self._located and self._located[0] <= stamp - RATE_WINDOW_NS:
-                self._located.popleft()
-            rate = len(self._located) * 1e9 / RATE_WINDOW_NS
-        self._at(stamp)
-        rr.log("plots/located_balls_hz", rr.Scalars([rate]), recording=self.recording)
-        rr.log("plots/ball_distance_m", rr.Scalars([ball["distance"]]), recording=self.recording)
+        self._located.append(stamp)
+        while self._located and self._located[0] <= stamp - RATE_WINDOW_NS:
+            self._located.popleft()
+        with self._pending:
+            self._points["plots/located_balls_hz"].append((stamp, len(self._located) * 1e9 / RATE_WINDOW_NS))
+            self._points["plots/ball_distance_m"].append((stamp, ball["distance"]))
 
     def show_truth(self, truth: dict) -> None:
         robot = truth["robot"]
-        with self._lock:
-            self._path.append((robot["x"], robot["y"], 0.0))
-            path = list(self._path)
+        position = (robot["x"], robot["y"], 0.0)
+        with self._pending:
+            if not self._path or math.dist(self._path[-1], position) >= self.config.path_step_m:
+                self._path.append(position)
+            self._truth = truth
+
+    def show_twist(self, twist: dict) -> None:
+        stamp = twist["header"]["stamp"]
+        with self._pending:
+            self._points["plots/cmd_vel/linear_x"].append((stamp, twist["linear"][0]))
+            self._points["plots/cmd_vel/angular_z"].append((stamp, twist["angular"][2]))
+
+    def _show_world(self, truth: dict, path: list) -> None:
+        robot = truth["robot"]
         self._at(truth["header"]["stamp"])
         if truth["balls"]:
             rr.log("world/balls", rr.Points3D([ball["position"] for ball in truth["balls"]],
@@ -244,14 +315,15 @@ class RerunBridge(Bridge):
                                               radii=rr.Radius.ui_points(8),
                                               colors=[(204, 255, 51)] * len(truth["balls"])),
                    recording=self.recording)
-        rr.log("world/robot", rr.Transform3D(translation=path[-1],
+        rr.log("world/robot", rr.Transform3D(translation=(robot["x"], robot["y"], 0.0),
                                              rotation=rr.RotationAxisAngle(axis=(0, 0, 1), radians=robot["yaw"])),
                rr.Points3D([(0.0, 0.0, 0.05)], radii=[0.08], colors=[(80, 150, 255)]),
                recording=self.recording)
         rr.log("world/path", rr.LineStrips3D([path], colors=[(80, 150, 255)], radii=[0.01]),
                recording=self.recording)
 
-    def show_twist(self, twist: dict) -> None:
-        self._at(twist["header"]["stamp"])
-        rr.log("plots/cmd_vel/linear_x", rr.Scalars([twist["linear"][0]]), recording=self.recording)
-        rr.log("plots/cmd_vel/angular_z", rr.Scalars([twist["angular"][2]]), recording=self.recording)
+    def close(self) -> None:
+        super().close()
+        self._stop_updates.set()
+        self._updater.join(timeout=5)
+        self.update()

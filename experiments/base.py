@@ -75,6 +75,8 @@ class Options:
     # a proposed fix); every experiment uses them and the report lists them.
     detector_overrides: list[str] = field(default_factory=list)
     follower_overrides: list[str] = field(default_factory=list)
+    # --view KEY=VALUE: what `balltrack view` sends Rerun's page, changed (live_view).
+    view_overrides: list[str] = field(default_factory=list)
 
     def detector_config(self):
         """The detector parameters every experiment uses: defaults plus ``--detector``."""
@@ -92,6 +94,13 @@ class Options:
         command_line = parse_overrides(self.follower_overrides)
         overrides += [f"{key}={value}" for key, value in command_line.items()]
         return load_config(FollowerConfig, None, overrides)
+
+    def view_config(self):
+        """The viewer settings live_view uses: defaults plus ``--view``."""
+        from balltrack.common.config import load_config
+        from balltrack.deploy.view_config import RerunViewConfig
+
+        return load_config(RerunViewConfig, None, self.view_overrides)
 
     def budget(self, quick: int, full: int) -> int:
         """Frames (or runs) per condition: ``--frames`` if given, else the quick or full count."""

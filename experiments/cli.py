@@ -35,7 +35,8 @@ from balltrack.experiments.base import (PHOTOS_DEFAULT_TEXT, PHOTOS_VARIABLE, SH
 from balltrack.experiments.real_photos import photo_sets
 
 EXPERIMENTS = ("illumination", "range", "accuracy", "tracking", "sizes", "multiball",
-               "distractors", "real_photos", "detector_speed", "colour_setting", "latency", "fuzz", "soak", "fleet")
+               "distractors", "real_photos", "detector_speed", "colour_setting", "latency", "live_view", "fuzz", "soak",
+               "fleet")
 TRANSPORTS = ("auto", "in-process", "zenoh")
 
 
@@ -63,6 +64,8 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--follower", action="append", default=[], metavar="KEY=VALUE",
                         help="change a follower parameter for the closed-loop experiments "
                              "(repeatable; overrides the experiment's own settings)")
+    parser.add_argument("--view", action="append", default=[], metavar="KEY=VALUE",
+                        help="live_view: change what `balltrack view` sends Rerun's page (repeatable)")
     parser.add_argument("--minutes", type=int, default=None, metavar="N",
                         help="soak: minutes to run (default 30, --quick 2)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -97,10 +100,12 @@ def parse(argv: list[str]) -> Options:
             photos = None
     options = Options(out=out, quick=args.quick, frames=args.frames, seed=args.seed,
                       photos=photos, transport=args.transport, progress=not args.no_progress,
-                      detector_overrides=args.detector, follower_overrides=args.follower)
+                      detector_overrides=args.detector, follower_overrides=args.follower,
+                      view_overrides=args.view)
     try:
         options.detector_config()
         options.follower_config()
+        options.view_config()
     except ValueError as error:  # ConfigError: unknown key or bad value
         parser.error(str(error))
     options.name = args.name  # type: ignore[attr-defined]
@@ -118,6 +123,8 @@ def run_one(name: str, options: Options) -> tuple[ExperimentResult, bool]:
             result.settings["detector changed from defaults"] = " ".join(options.detector_overrides)
         if options.follower_overrides:
             result.settings["follower changed (command line)"] = " ".join(options.follower_overrides)
+        if options.view_overrides:
+            result.settings["view changed (command line)"] = " ".join(options.view_overrides)
         return result, True
     except Exception as error:  # noqa: BLE001  (reported in results and on stderr)
         traceback.print_exc()

@@ -25,3 +25,21 @@ def resident_mb(pid: int | None) -> float | None:
     except OSError:
         return None
     return None
+
+
+def tree_cpu_seconds(pid: int | None) -> float:
+    """:func:`cpu_seconds` of ``pid`` and of all its descendants now alive (a browser's
+    renderer and GPU processes: time of children already gone is not counted)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    total, pending = 0.0, [pid] if pid is not None else []
+    while pending:
+        current = pending.pop()
+        total += cpu_seconds(current)
+        pending.extend(children.get(current, []))
+    return total

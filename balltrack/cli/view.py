@@ -15,8 +15,10 @@ import sys
 import urllib.parse
 
 from balltrack.cli.session import close_or_report, networked, open_or_report
+from balltrack.common.config import ConfigError, load_config
 from balltrack.common.network import port_taken
 from balltrack.common.shutdown import stop_on_signals
+from balltrack.deploy.view_config import RerunViewConfig
 
 
 def _fail(args, reason: str, status: int) -> int:
@@ -28,7 +30,7 @@ def _fail(args, reason: str, status: int) -> int:
 MEMORY_LIMIT = re.compile(r"0|\d+(\.\d+)? ?(%|B|kB|MB|GB|TB|KiB|MiB|GiB|TiB)")
 
 
-def _serve_rerun(args, session, stop) -> int:
+def _serve_rerun(args, session, stop, config) -> int:
     import rerun as rr
 
     from balltrack.deploy.view import RerunBridge, rerun_blueprint
@@ -41,12 +43,12 @@ def _serve_rerun(args, session, stop) -> int:
             return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: port {port} is in use", 1)
     try:
         server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit,
-                                      default_blueprint=rerun_blueprint())
+                                      default_blueprint=rerun_blueprint(config))
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=server)
     except Exception as error:  # the port taken, an address not ours
         return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
                            f"{str(error).strip().splitlines()[0]}", 1)
-    bridge = RerunBridge(session, recording, args.namespace)
+    bridge = RerunBridge(session, recording, args.namespace, config)
     # (Rerun's Python API binds every interface, and serves without a password)
     print(f"balltrack view: Rerun viewer on {viewer_url(args.port, server)} (served on every interface, "
           "to anyone who reaches these ports; from another host, its address in place of both "
@@ -102,6 +104,12 @@ def command_view(args) -> int:
         return _fail(args, "--host: Rerun's viewer serves on every interface (its Python API takes "
                            "no address); --foxglove serves on one", 2)
     args.host = args.host or "127.0.0.1"
+    if args.overrides and args.foxglove:
+        return _fail(args, "--set: the settings are Rerun's (deploy/view_config.py); Foxglove has none", 2)
+    try:
+        config = load_config(RerunViewConfig, None, args.overrides)
+    except ConfigError as error:
+        return _fail(args, f"--set: {error}", 2)
     if not args.foxglove and not MEMORY_LIMIT.fullmatch(args.memory_limit):
         return _fail(args, f"--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), "
                            f"got {args.memory_limit!r}", 2)
@@ -119,7 +127,7 @@ def command_view(args) -> int:
     if session is None:
         return 1
     try:
-        return (_serve_foxglove if args.foxglove else _serve_rerun)(args, session, stop)
+        return _serve_foxglove(args, session, stop) if args.foxglove else _serve_rerun(args, session, stop, config)
     finally:
         close_or_report(args, session)
 
@@ -135,5 +143,10 @@ def register(commands) -> None:
                      help="port to serve on (Rerun's web page: default 9090; Foxglove: 8765, 0 = any)")
     sub.add_argument("--grpc-port", type=int, default=9876,
                      help="Rerun: the port its viewer reads the data from (default 9876)")
-    sub.add_argument("--memory-limit", default="256MiB",
-                     help="Rerun: data kept for viewers that connect later (default 256MiB; e.g. 2GB, 25%% of the RAM)")
+    # (a page that connects gets all of it first, before the present: the less kept, the sooner
+    # a page opened late is live; at the default rates this is a minute or two of the past)
+    sub.add_argument("--memory-limit", default="32MiB",
+                     help="Rerun: data kept for viewers that connect later (default 32MiB; e.g. 2GB, 25%% of the RAM)")
+    sub.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
+                     help="Rerun: what is sent to its page, e.g. update_rate_hz=10 or frame_width=640 (repeatable; "
+                          "the keys: docs/parameters.md, view)")

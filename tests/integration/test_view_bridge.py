@@ -71,3 +71,64 @@ def test_a_viewer_that_keeps_up_shows_every_message_in_order(session):
     finally:
         bridge.close()
     assert bridge.shown == list(range(COUNT)) and bridge.dropped == 0
+
+
+def ball(seq: int) -> bytes:
+    return encode("Ball3D", {"header": header(seq * 33_000_000, seq), "x": 0.1, "y": 0.0, "z": 2.0,
+                             "distance": 2.0 + seq / 100})
+
+
+def truth(seq: int, x: float) -> bytes:
+    return encode("GroundTruth", {"header": header(seq * 33_000_000, seq), "robot": {"x": x, "y": 0.0, "yaw": 0.0},
+                                  "balls": []})
+
+
+def chunks_of(path) -> dict[str, list]:
+    """The non-static chunks of a saved recording, by entity."""
+    from rerun.chunk import RrdReader
+
+    found: dict[str, list] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        if not chunk.is_static:
+            found.setdefault(chunk.entity_path, []).append(chunk)
+    return found
+
+
+def test_rerun_gets_what_came_in_one_update_frames_shrunk_and_the_path_thinned(session, tmp_path):
+    import numpy as np
+    import rerun as rr
+
+    from balltrack.common.images import bgr_to_message
+    from balltrack.common.keys import DETECTED_BALL_3D, GROUND_TRUTH, IMAGE_OUT
+    from balltrack.deploy.view_config import RerunViewConfig
+
+    recording = rr.RecordingStream("balltrack-test")
+    recording.save(tmp_path / "view.rrd")
+    # (an update period longer than the test: what came is sent once, by close())
+    config = RerunViewConfig(update_rate_hz=0.01, frame_width=320, path_step_m=0.05)
+    bridge = view.RerunBridge(session, recording, config=config)
+    try:
+        publishers = {key: session.declare_publisher(key) for key in (IMAGE_OUT, DETECTED_BALL_3D, GROUND_TRUTH)}
+        for publisher in publishers.values():
+            wait_until(lambda: publisher.matching_status.matching, 10, "the bridge's subscriber")
+        for seq in range(20):
+            publishers[IMAGE_OUT].put(encode("Image", bgr_to_message(np.full((480, 640, 3), seq, np.uint8), seq, seq)))
+            publishers[DETECTED_BALL_3D].put(ball(seq))
+            # the robot 1 cm further each time: every 5th position kept
+            publishers[GROUND_TRUTH].put(truth(seq, seq / 100))
+        wait_until(lambda: (bridge._frame or {}).get("header", {}).get("seq") == 19
+                   and (bridge._truth or {}).get("header", {}).get("seq") == 19
+                   and len(bridge._points["plots/ball_distance_m"]) == 20, 10, "every message taken, none sent")
+    finally:
+        bridge.close()
+        recording.disconnect()
+    chunks = chunks_of(tmp_path / "view.rrd")
+    # one frame, the newest, shrunk to frame_width
+    (image,) = [chunk.to_record_batch() for chunk in chunks["/camera/image"]]
+    assert [(entry["width"], entry["height"]) for entry in image.column("Image:format").to_pylist()[0]] == [(320, 240)]
+    assert np.asarray(image.column("Image:buffer").to_pylist()[0][0]).max() == 19
+    for series in ("/plots/ball_distance_m", "/plots/located_balls_hz"):
+        assert [chunk.num_rows for chunk in chunks[series]] == [20], series
+    (path,) = [chunk.to_record_batch() for chunk in chunks["/world/path"]]
+    assert [len(strip) for strip in path.column("LineStrips3D:strips").to_pylist()[0]] == [4]
+    assert bridge.rejected == 0

@@ -157,6 +157,9 @@ def test_annotated_frame_reaches_a_foxglove_client(session, launch, viewer):
     (["--memory-limit", "abc"],
      "--memory-limit: expected an amount such as 256MiB, 2GB or 25% (of the RAM), got 'abc'"),
     (["--memory-limit", "100"], "--memory-limit: expected an amount"),
+    (["--set", "update_rate_hz=0"], "--set: update_rate_hz: must be in (0, 30]"),
+    (["--set", "frame_hz=5"], "--set: frame_hz: unknown parameter"),
+    (["--foxglove", "--set", "update_rate_hz=5"], "--set: the settings are Rerun's"),
 ])
 def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
     process = Process([sys.executable, "-m", "balltrack", "view", *arguments, "--connect", router.endpoint],
