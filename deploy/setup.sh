@@ -79,7 +79,7 @@ importable() {
     .venv/bin/python - <<'PY' 2>/dev/null
 import importlib.util, sys
 modules = ("zenoh", "cv2", "numpy", "numba", "msgpack", "mujoco", "matplotlib", "tqdm", "pytest", "torch", "onnx", "onnxruntime",
-           "pytest_timeout", "hypothesis", "importlinter", "balltrack.common", "balltrack.services", "balltrack.deploy")
+           "pytest_timeout", "xdist", "hypothesis", "importlinter", "balltrack.common", "balltrack.services", "balltrack.deploy")
 sys.exit(any(importlib.util.find_spec(name) is None for name in modules))
 PY
 }

@@ -7,6 +7,10 @@ import pytest
 from balltrack.experiments import fuzz
 from balltrack.experiments.base import Options
 
+# The quick tier leaves the campaign to the whole suite and keeps malformed input to real services
+# (test_malformed_input.py) and mutated messages to the decoder (tests/unit/test_messages_properties.py).
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.timeout(240)  # the quick campaign fits within about a minute; this only stops a hang
 def test_quick_fuzz_campaign_crashes_nothing(tmp_path):

@@ -90,6 +90,7 @@ def fresh_venv(wheel, tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.mark.slow  # (a fresh virtual environment: left to the whole suite, out of the quick tier)
 def test_the_installed_wheel_runs_from_any_folder(fresh_venv, tmp_path):
     command = fresh_venv / "bin" / "balltrack"
     where = run([str(fresh_venv / "bin" / "python"), "-c",

@@ -32,7 +32,9 @@ import pytest
 from tests.harness import Process
 from tests.integration.test_multihost import STARTUP, launch, network, wait_until  # noqa: F401
 
-pytestmark = pytest.mark.netns
+# slow: a whole chase over three hosts, cut and healed twice; the quick tier keeps
+# test_multihost.py's hosts and test_simulator_service.py's safety stop.
+pytestmark = [pytest.mark.netns, pytest.mark.slow]
 
 STOP_WITHIN = 0.7       # s after the cut: cmd_timeout 0.5 s + braking
 STILL_SPEED = 0.01      # m/s (and rad/s): below this the robot is standing

@@ -53,17 +53,15 @@ def render_board(rotation: tuple[float, float, float], translation: tuple[float,
     # Board plane point (X, Y, 0) -> camera: X r1 + Y r2 + t, so the ray through (x, y, 1) meets
     # the plane at [r1 r2 t]^-1 (x, y, 1): a homography.
     to_plane = np.linalg.inv(np.column_stack([matrix[:, 0], matrix[:, 1], np.array(translation, float)]))
-    scale = PIXELS_PER_SQUARE / SQUARE
+    # Board metres -> texture pixel centres (the first inner corner is 2 squares in), joined to it
+    # as one homography, which OpenCV applies to every pixel's ray.
+    scale, offset = PIXELS_PER_SQUARE / SQUARE, 2 * PIXELS_PER_SQUARE - 0.5
+    to_texture = np.array([[scale, 0.0, offset], [0.0, scale, offset], [0.0, 0.0, 1.0]]) @ to_plane
     total = np.zeros((HEIGHT, WIDTH), np.float32)
     for normalised in rays:
-        homogeneous = np.concatenate([normalised, np.ones((HEIGHT, WIDTH, 1))], axis=2).reshape(-1, 3)
-        plane = homogeneous @ to_plane.T
-        plane = plane[:, :2] / plane[:, 2:]
-        # Board metres -> texture pixel centres; the first inner corner is 2 squares in.
-        map_x = (plane[:, 0] * scale + 2 * PIXELS_PER_SQUARE - 0.5).reshape(HEIGHT, WIDTH).astype(np.float32)
-        map_y = (plane[:, 1] * scale + 2 * PIXELS_PER_SQUARE - 0.5).reshape(HEIGHT, WIDTH).astype(np.float32)
-        total += cv2.remap(texture, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                           borderValue=128).astype(np.float32)
+        texture_points = cv2.perspectiveTransform(normalised.reshape(-1, 1, 2), to_texture)
+        total += cv2.remap(texture, texture_points.reshape(HEIGHT, WIDTH, 2).astype(np.float32), None,
+                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=128).astype(np.float32)
     image = total / len(rays) + np.random.default_rng(seed).normal(0, 2, total.shape)
     return cv2.cvtColor(np.clip(image, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
 

@@ -98,6 +98,7 @@ def test_own_blob_boxes_hold_each_blob_with_the_coarse_searchs_margin():
     assert detector_speed.own_blob_boxes(np.zeros((480, 640), np.uint8)) == []
 
 
+@pytest.mark.slow  # (times both detectors on every photo set: left to the whole suite, out of the quick tier)
 def test_detector_speed_measures_both_detectors_side_by_side(tmp_path):
     status = cli.main(["detector_speed", "--frames", "3", "--quick", "--out", str(tmp_path), "--no-progress"])
     assert status == 0

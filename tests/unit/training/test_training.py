@@ -123,6 +123,7 @@ def test_the_exported_network_runs_in_opencv_as_in_torch(tmp_path):
     assert work.shape == (240, 320, 3) and scale == 0.5
 
 
+@pytest.mark.slow  # (trains for several epochs: left to the whole suite, out of the quick tier)
 def test_a_short_training_learns_balls_from_not_balls():
     pytest.importorskip("torch", reason="the train extra (pip install -e '.[train]') is not installed")
     from balltrack.training import train
