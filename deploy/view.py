@@ -184,24 +184,30 @@ SERIES_COLOURS = {"plots/located_balls_hz": (80, 150, 255), "plots/ball_distance
                   "plots/cmd_vel/linear_x": (230, 60, 200), "plots/cmd_vel/angular_z": (60, 200, 230)}
 
 
-def rerun_blueprint(config: RerunViewConfig | None = None):
+def rerun_blueprint(config: RerunViewConfig | None = None, robots: list[str] | None = None):
     """The layout: the annotated frame large on the left; the world (true balls, the robot and
-    its path) and the time plots (the last ``plot_window_s`` of them) on the right."""
+    its path) and the time plots (the last ``plot_window_s`` of them) on the right. With
+    ``robots`` (namespaces), that layout once per robot, each in a tab named after it, over the
+    entities under ``<robot>/``."""
     import rerun.blueprint as rrb
 
     config = config or RerunViewConfig()
     window = rrb.VisibleTimeRange("sim_time", start=rrb.TimeRangeBoundary.cursor_relative(seconds=-config.plot_window_s),
                                   end=rrb.TimeRangeBoundary.cursor_relative())
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial2DView(origin="camera", name="annotated frame"),
-            rrb.Vertical(rrb.Spatial3DView(origin="world", name="world (ground truth)"),
-                         rrb.TimeSeriesView(origin="plots/cmd_vel", name="cmd_vel", time_ranges=window),
-                         rrb.TimeSeriesView(origin="plots", contents=["$origin/located_balls_hz",
-                                                                     "$origin/ball_distance_m"],
+
+    def layout(prefix: str, name: str | None):
+        return rrb.Horizontal(
+            rrb.Spatial2DView(origin=f"{prefix}camera", name="annotated frame"),
+            rrb.Vertical(rrb.Spatial3DView(origin=f"{prefix}world", name="world (ground truth)"),
+                         rrb.TimeSeriesView(origin=f"{prefix}plots/cmd_vel", name="cmd_vel", time_ranges=window),
+                         rrb.TimeSeriesView(origin=f"{prefix}plots", contents=["$origin/located_balls_hz",
+                                                                                "$origin/ball_distance_m"],
                                             name="located balls", time_ranges=window)),
-            column_shares=[3, 2]),
-        collapse_panels=True)
+            column_shares=[3, 2], name=name)
+
+    if robots:
+        return rrb.Blueprint(rrb.Tabs(*(layout(f"{robot}/", robot) for robot in robots)), collapse_panels=True)
+    return rrb.Blueprint(layout("", None), collapse_panels=True)
 
 
 class RerunBridge(Bridge):
@@ -218,8 +224,10 @@ class RerunBridge(Bridge):
     the next is due, and shows each change only after several."""
 
     def __init__(self, session, recording: rr.RecordingStream, namespace: str = "",
-                 config: RerunViewConfig | None = None):
+                 config: RerunViewConfig | None = None, entity_prefix: str = ""):
         self.recording = recording
+        # Several robots in one recording: each bridge's entities under its robot's name.
+        self.prefix = entity_prefix
         self.config = config or RerunViewConfig()
         self._path: collections.deque = collections.deque(maxlen=PATH_POINTS)
         self._located: collections.deque = collections.deque()  # stamps of the last second's balls
@@ -230,8 +238,8 @@ class RerunBridge(Bridge):
         self._truth: dict | None = None
         self._points: dict[str, list[tuple[int, float]]] = {path: [] for path in SERIES_COLOURS}
         for path, colour in SERIES_COLOURS.items():
-            rr.log(path, rr.SeriesLines(colors=[colour], names=[path.rsplit("/", 1)[1]]), static=True,
-                   recording=recording)
+            rr.log(self.prefix + path, rr.SeriesLines(colors=[colour], names=[path.rsplit("/", 1)[1]]),
+                   static=True, recording=recording)
         self._stop_updates = threading.Event()
         self._updater = threading.Thread(target=self._update_regularly, name="view-updates", daemon=True)
         self._updater.start()
@@ -257,7 +265,7 @@ class RerunBridge(Bridge):
         if truth is not None:
             self._show_world(truth, path)
         for series, values in points.items():
-            rr.send_columns(series, indexes=[rr.TimeColumn("sim_time", duration=[stamp / 1e9 for stamp, _ in values])],
+            rr.send_columns(self.prefix + series, indexes=[rr.TimeColumn("sim_time", duration=[stamp / 1e9 for stamp, _ in values])],
                             columns=rr.Scalars.columns(scalars=[value for _, value in values]),
                             recording=self.recording)
 
@@ -273,7 +281,7 @@ class RerunBridge(Bridge):
         self._at(frame["header"]["stamp"])
         # Pixels, not JPEG (rr.EncodedImage): the web viewer decodes JPEG in the page, and one
         # rendering in software showed its loading mark in place of every frame.
-        rr.log("camera/image", rr.Image(picture, color_model="BGR"), recording=self.recording)
+        rr.log(self.prefix + "camera/image", rr.Image(picture, color_model="BGR"), recording=self.recording)
 
     def _at(self, stamp: int) -> None:
         rr.set_time("sim_time", duration=stamp / 1e9, recording=self.recording)
@@ -310,16 +318,16 @@ class RerunBridge(Bridge):
         robot = truth["robot"]
         self._at(truth["header"]["stamp"])
         if truth["balls"]:
-            rr.log("world/balls", rr.Points3D([ball["position"] for ball in truth["balls"]],
+            rr.log(self.prefix + "world/balls", rr.Points3D([ball["position"] for ball in truth["balls"]],
                                               # a few pixels whatever the zoom: 3 cm is a dot
                                               radii=rr.Radius.ui_points(8),
                                               colors=[(204, 255, 51)] * len(truth["balls"])),
                    recording=self.recording)
-        rr.log("world/robot", rr.Transform3D(translation=(robot["x"], robot["y"], 0.0),
+        rr.log(self.prefix + "world/robot", rr.Transform3D(translation=(robot["x"], robot["y"], 0.0),
                                              rotation=rr.RotationAxisAngle(axis=(0, 0, 1), radians=robot["yaw"])),
                rr.Points3D([(0.0, 0.0, 0.05)], radii=[0.08], colors=[(80, 150, 255)]),
                recording=self.recording)
-        rr.log("world/path", rr.LineStrips3D([path], colors=[(80, 150, 255)], radii=[0.01]),
+        rr.log(self.prefix + "world/path", rr.LineStrips3D([path], colors=[(80, 150, 255)], radii=[0.01]),
                recording=self.recording)
 
     def close(self) -> None:

@@ -2,6 +2,7 @@
 
     balltrack view [--port 9090]              # Rerun's web viewer: open the address it prints
     balltrack view --foxglove [--port 8765]   # a Foxglove WebSocket server (ws://HOST:PORT)
+    balltrack view --namespaces robot1,robot2 # Rerun: several robots, a tab each
 
 Rerun shows the annotated frame, the true balls and the robot's path in the world frame, and
 time plots of cmd_vel and of the located-ball rate (its data over gRPC on --grpc-port).
@@ -16,6 +17,7 @@ import urllib.parse
 
 from balltrack.cli.session import close_or_report, networked, open_or_report
 from balltrack.common.config import ConfigError, load_config
+from balltrack.common.keys import namespace_list
 from balltrack.common.network import port_taken
 from balltrack.common.shutdown import stop_on_signals
 from balltrack.deploy.view_config import RerunViewConfig
@@ -43,20 +45,22 @@ def _serve_rerun(args, session, stop, config) -> int:
             return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: port {port} is in use", 1)
     try:
         server = recording.serve_grpc(grpc_port=args.grpc_port, server_memory_limit=args.memory_limit,
-                                      default_blueprint=rerun_blueprint(config))
+                                      default_blueprint=rerun_blueprint(config, args.robots))
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=server)
     except Exception as error:  # the port taken, an address not ours
         return _fail(args, f"cannot serve on ports {args.port}/{args.grpc_port}: "
                            f"{str(error).strip().splitlines()[0]}", 1)
-    bridge = RerunBridge(session, recording, args.namespace, config)
+    bridges = ([RerunBridge(session, recording, robot, config, entity_prefix=f"{robot}/") for robot in args.robots]
+               or [RerunBridge(session, recording, args.namespace, config)])
     # (Rerun's Python API binds every interface, and serves without a password)
     print(f"balltrack view: Rerun viewer on {viewer_url(args.port, server)} (served on every interface, "
           "to anyone who reaches these ports; from another host, its address in place of both "
           "127.0.0.1; Ctrl-C to stop)", file=sys.stderr, flush=True)
     stop.wait()
-    bridge.close()
+    for bridge in bridges:
+        bridge.close()
     recording.disconnect()
-    return _report(bridge)
+    return _report(bridges)
 
 
 def viewer_url(web_port: int, data_url: str) -> str:
@@ -82,16 +86,18 @@ def _serve_foxglove(args, session, stop) -> int:
     stop.wait()
     bridge.close()
     server.stop()
-    return _report(bridge)
+    return _report([bridge])
 
 
-def _report(bridge) -> int:
+def _report(bridges: list) -> int:
     # One summary line (the viewer_cost experiment reads it): what was shown and how late.
-    lags = sorted(bridge.lags)
+    lags = sorted(lag for bridge in bridges for lag in bridge.lags)
     lag = (f"; arrival -> shown p50 {1000 * lags[len(lags) // 2]:.1f} ms, "
            f"p99 {1000 * lags[min(len(lags) - 1, int(0.99 * len(lags)))]:.1f} ms" if lags else "")
-    print(f"balltrack view: shown {bridge.handled} messages, {bridge.skipped_frames} older frames skipped, "
-          f"{bridge.dropped} dropped, {bridge.rejected} malformed{lag}", file=sys.stderr)
+    total = {name: sum(getattr(bridge, name) for bridge in bridges)
+             for name in ("handled", "skipped_frames", "dropped", "rejected")}
+    print(f"balltrack view: shown {total['handled']} messages, {total['skipped_frames']} older frames skipped, "
+          f"{total['dropped']} dropped, {total['rejected']} malformed{lag}", file=sys.stderr)
     return 0
 
 
@@ -104,6 +110,12 @@ def command_view(args) -> int:
         return _fail(args, "--host: Rerun's viewer serves on every interface (its Python API takes "
                            "no address); --foxglove serves on one", 2)
     args.host = args.host or "127.0.0.1"
+    try:
+        args.robots = namespace_list(args.namespaces, "--namespaces") if args.namespaces is not None else []
+    except ValueError as error:
+        return _fail(args, str(error), 2)
+    if args.robots and (args.foxglove or args.namespace):
+        return _fail(args, "--namespaces: Rerun only, and not with --namespace", 2)
     if args.overrides and args.foxglove:
         return _fail(args, "--set: the settings are Rerun's (deploy/view_config.py); Foxglove has none", 2)
     try:
@@ -147,6 +159,8 @@ def register(commands) -> None:
     # a page opened late is live; at the default rates this is a minute or two of the past)
     sub.add_argument("--memory-limit", default="32MiB",
                      help="Rerun: data kept for viewers that connect later (default 32MiB; e.g. 2GB, 25%% of the RAM)")
+    sub.add_argument("--namespaces", default=None, metavar="NS,NS,...",
+                     help="Rerun: several robots in one page, a tab each (e.g. robot1,robot2)")
     sub.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
                      help="Rerun: what is sent to its page, e.g. update_rate_hz=10 or frame_width=640 (repeatable; "
                           "the keys: docs/parameters.md, view)")

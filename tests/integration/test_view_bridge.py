@@ -132,3 +132,42 @@ def test_rerun_gets_what_came_in_one_update_frames_shrunk_and_the_path_thinned(s
     (path,) = [chunk.to_record_batch() for chunk in chunks["/world/path"]]
     assert [len(strip) for strip in path.column("LineStrips3D:strips").to_pylist()[0]] == [4]
     assert bridge.rejected == 0
+
+
+def test_rerun_shows_several_robots_each_under_its_name(session, tmp_path):
+    import numpy as np
+    import rerun as rr
+
+    from balltrack.common.images import bgr_to_message
+    from balltrack.common.keys import GROUND_TRUTH, IMAGE_OUT, Keys
+    from balltrack.deploy.view_config import RerunViewConfig
+
+    robots = ("robot1", "robot2")
+    recording = rr.RecordingStream("balltrack-test")
+    recording.save(tmp_path / "view.rrd")
+    config = RerunViewConfig(update_rate_hz=0.01)  # (sent once, by close())
+    bridges = {robot: view.RerunBridge(session, recording, robot, config, entity_prefix=f"{robot}/")
+               for robot in robots}
+    try:
+        for value, robot in enumerate(robots, start=1):
+            names = Keys(robot)
+            frames, truths = session.declare_publisher(names(IMAGE_OUT)), session.declare_publisher(names(GROUND_TRUTH))
+            for publisher in (frames, truths):
+                wait_until(lambda: publisher.matching_status.matching, 10, f"{robot}'s bridge")
+            frames.put(encode("Image", bgr_to_message(np.full((240, 320, 3), 10 * value, np.uint8), 1, 1)))
+            truths.put(truth(1, float(value)))
+        for robot, bridge in bridges.items():
+            wait_until(lambda: bridge._frame is not None and bridge._truth is not None, 10, f"{robot}'s messages")
+    finally:
+        for bridge in bridges.values():
+            bridge.close()
+        recording.disconnect()
+    chunks = chunks_of(tmp_path / "view.rrd")
+    assert "/camera/image" not in chunks
+    for value, robot in enumerate(robots, start=1):
+        (image,) = [chunk.to_record_batch() for chunk in chunks[f"/{robot}/camera/image"]]
+        # each robot's own frame under its own name
+        assert np.asarray(image.column("Image:buffer").to_pylist()[0][0]).max() == 10 * value
+        assert f"/{robot}/world/robot" in chunks
+    blueprint = view.rerun_blueprint(config, list(robots))
+    assert blueprint is not None

@@ -160,6 +160,8 @@ def test_annotated_frame_reaches_a_foxglove_client(session, launch, viewer):
     (["--set", "update_rate_hz=0"], "--set: update_rate_hz: must be in (0, 30]"),
     (["--set", "frame_hz=5"], "--set: frame_hz: unknown parameter"),
     (["--foxglove", "--set", "update_rate_hz=5"], "--set: the settings are Rerun's"),
+    (["--namespaces", "robot1,robot1"], "--namespaces: 'robot1' is listed twice"),
+    (["--namespaces", "robot1", "--foxglove"], "--namespaces: Rerun only, and not with --namespace"),
 ])
 def test_bad_options_are_one_line_errors(router, log_dir, arguments, reason):
     process = Process([sys.executable, "-m", "balltrack", "view", *arguments, "--connect", router.endpoint],
