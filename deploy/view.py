@@ -177,6 +177,9 @@ class FoxgloveBridge(Bridge):
 
 PATH_POINTS = 5_000  # the robot's path kept for the line strip, its oldest points dropped first
 RATE_WINDOW_NS = 1_000_000_000
+# Seconds an update may wait for Rerun's server to take it (the server drops old data past its
+# memory limit, so it takes everything at once in practice).
+FLUSH_WAIT = 1.0
 
 
 # Plot colours away from the ball's yellow-green, so that colour on screen means the ball.
@@ -268,6 +271,8 @@ class RerunBridge(Bridge):
             rr.send_columns(self.prefix + series, indexes=[rr.TimeColumn("sim_time", duration=[stamp / 1e9 for stamp, _ in values])],
                             columns=rr.Scalars.columns(scalars=[value for _, value in values]),
                             recording=self.recording)
+        # At once: Rerun's batcher would otherwise hold an update up to its flush tick (0.2 s).
+        self.recording.flush(timeout_sec=FLUSH_WAIT)
 
     def _show_frame(self, frame: dict) -> None:
         try:
