@@ -57,6 +57,15 @@ def development_photos(option: str | Path | None = None) -> Path:
     return Path(configured) if configured else SHARED_PHOTOS
 
 
+def shown_path(path: str | Path) -> str:
+    """``path`` as a report shows it: relative to the repository when it is beside it (the
+    development photos in ../shared/data), so that a report does not name one machine's folders."""
+    path = Path(path).resolve()
+    if path.is_relative_to(REPOSITORY.parent):
+        return os.path.relpath(path, REPOSITORY)
+    return str(path)
+
+
 @dataclass
 class Options:
     """Command-line options shared by all experiments."""

@@ -407,7 +407,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
     over its frames, see ``measure``), then the balltrack detector's stage split over
     ``passes`` passes; OpenCV on ``threads`` threads. The figures, goals and tables of
     ``balltrack experiment detector_speed`` and of this module's main."""
-    from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed
+    from balltrack.experiments.base import ExperimentResult, Stopwatch, record_machine_speed, shown_path
 
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="in-process", quick=quick)
@@ -527,7 +527,7 @@ def speed_result(config: DetectorConfig, render_count: int, photos: Path | None,
                     "The same for the plain pipeline: its colour mask (blur, HSV, CLAHE, inRange) "
                     "and its Hough transform. The goal leaves the balltrack detector half the "
                     "plain pipeline's time for all its stages:")
-        result.settings = {"photos": (f"{photos}, each made a 640x480 frame of a landscape 4:3 camera "
+        result.settings = {"photos": (f"{shown_path(photos)}, each made a 640x480 frame of a landscape 4:3 camera "
                                       "(portrait turned, wider cut, nothing stretched)") if "photos" in sets else "none",
                            "plain pipeline": "blur 5, HSV, CLAHE on V, inRange, HoughCircles"}
     finally:

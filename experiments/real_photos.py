@@ -422,7 +422,7 @@ SUMMARY_HEADERS = ["set", "images", "balls >= 20 px", "learned: recall, false po
 
 def run(options) -> "ExperimentResult":
     """The ``balltrack experiment real_photos`` entry point (skipped without ``--photos``)."""
-    from balltrack.experiments.base import ExperimentResult, Stopwatch, percent, progress
+    from balltrack.experiments.base import ExperimentResult, Stopwatch, percent, progress, shown_path
 
     clock = Stopwatch()
     result = ExperimentResult(NAME, TITLE, mode="offline", quick=options.quick)
@@ -438,7 +438,7 @@ def run(options) -> "ExperimentResult":
         for folder in folders:
             scores.update(score_sets([folder], config))
             bar.update()
-    result.settings = {"photos": str(options.photos), "sets": ", ".join(scores),
+    result.settings = {"photos": shown_path(options.photos), "sets": ", ".join(scores),
                        "counted balls": f"box >= {MIN_BALL_PX} px wide",
                        "found": "a detection centre within half the ball's radius of the box centre",
                        "false positive": "a detection centre in no box",

@@ -4,7 +4,7 @@ $BALLTRACK_PHOTOS, else shared/data beside the repository; no help names a machi
 import pytest
 
 from balltrack.experiments import cli, detector_outputs, detector_speed, real_photos
-from balltrack.experiments.base import PHOTOS_VARIABLE, development_photos
+from balltrack.experiments.base import PHOTOS_VARIABLE, development_photos, shown_path
 from tests.harness import REPO
 from tests.unit.test_real_photos import write_set
 
@@ -57,3 +57,9 @@ def test_a_variable_naming_no_photos_is_refused(monkeypatch, tmp_path, capsys):
     assert exit_info.value.code == 2 and f"${PHOTOS_VARIABLE}: {tmp_path / 'missing'}" in capsys.readouterr().err
     assert detector_speed.main(["--frames", "3", "--repeats", "10"]) == 2
     assert f"{tmp_path / 'missing'}: not a folder" in capsys.readouterr().err
+
+
+def test_reports_show_the_photos_beside_the_repository_by_a_relative_path():
+    assert shown_path(BESIDE_THE_REPOSITORY) == "../shared/data"
+    assert shown_path(REPO.parent / "elsewhere" / "photos") == "../elsewhere/photos"
+    assert shown_path("/proc/balltrack-photos") == "/proc/balltrack-photos"  # not beside it: as it is
