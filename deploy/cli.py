@@ -26,7 +26,8 @@ from pathlib import Path
 
 from balltrack.common.arguments import ArgumentParser, seconds
 from balltrack.common.config import ConfigError, settings_by_service
-from balltrack.common.keys import CORE_SERVICES, SERVICES, Keys, process_services, services_of
+from balltrack.common.keys import (CORE_SERVICES, SERVICES, SERVICES_OF_MANY_ROBOTS, Keys, namespace_list,
+                                   process_services, services_of)
 from balltrack.common.network import port_taken
 from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
                                       config_endpoints, default_endpoints, load_config_file,
@@ -96,6 +97,7 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
         raise LaunchError("--listen, --router-connect, --router-config and --host need --router")
     if args.secure and (args.router_config or args.zenoh_config):
         raise LaunchError("--secure names the Zenoh configs itself: no --router-config or --zenoh-config with it")
+    namespaces = robots_served(args, services)
     if args.listen:
         listen = args.listen
     elif args.secure and args.router:
@@ -112,9 +114,36 @@ def build_specs(args) -> tuple[list[ChildSpec], dict]:
     return make_specs(services, parse_service_overrides(args.overrides, services), router=args.router,
                       listen=listen, router_connect=args.router_connect,
                       router_config=args.router_config, connect=args.connect,
-                      zenoh_config=args.zenoh_config, namespace=args.namespace,
+                      zenoh_config=args.zenoh_config, namespace=args.namespace, namespaces=namespaces,
                       config_dir=args.config_dir, log_level=args.log_level, secure=args.secure, host=args.host,
                       run_dir=args.run_dir)
+
+
+def robots_served(args, services: list[str]) -> list[str]:
+    """``--namespaces``' robots (none without it), each served by the processes of detector,
+    locator and follower; LaunchError, one line, for what cannot be served so."""
+    if args.namespaces is None:
+        return []
+    if args.namespaces.strip() == "auto":
+        raise LaunchError("--namespaces auto: not under the supervisor, which waits for each robot's services; "
+                          "name the robots (robot1,robot2), or run `balltrack run ... --namespaces auto`")
+    if args.namespace:
+        raise LaunchError("--namespaces: not with --namespace (one robot's namespace goes in either)")
+    if args.secure:
+        raise LaunchError("--namespaces: not with --secure (each robot's services hold that robot's own "
+                          "credentials: a process per robot, with --namespace)")
+    single = [name for process in services for name in process_services(process)
+              if name not in SERVICES_OF_MANY_ROBOTS and name != "simulator"]
+    mixed = [process for process in services if "simulator" in process_services(process)
+             and len(process_services(process)) > 1]
+    if single or mixed:
+        raise LaunchError(f"--namespaces: {', '.join(single + mixed)} serves one robot per process; with "
+                          f"--namespaces: {', '.join(SERVICES_OF_MANY_ROBOTS)}, and a simulator of its own "
+                          "(--set simulator.robots=N)")
+    try:
+        return namespace_list(args.namespaces, "--namespaces")
+    except ValueError as error:
+        raise LaunchError(str(error)) from None
 
 
 def secure_listen(directory: str, host: str | None) -> list[str]:
@@ -138,8 +167,8 @@ def config_listen(path: str) -> list[str]:
 def make_specs(services: list[str], overrides: dict[str, list[str]], router: bool = False,
                listen: list[str] = (DEFAULT_LISTEN,), router_connect: list[str] = (),
                router_config: str | None = None, connect: list[str] | None = None,
-               zenoh_config: str | None = None, namespace: str = "", config_dir: str | None = None,
-               log_level: str = "INFO", secure: str | None = None,
+               zenoh_config: str | None = None, namespace: str = "", namespaces: list[str] = (),
+               config_dir: str | None = None, log_level: str = "INFO", secure: str | None = None,
                host: str | None = None, run_dir: str | None = None) -> tuple[list[ChildSpec], dict]:
     """The children (router first, then ``services`` in order) and the facts ``status`` needs.
 
@@ -150,7 +179,9 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
     own role, and this program watches them as ``viewer``. Services of a router started here
     join it as peers (``--peer``), unless secure, given a Zenoh config or told to ``connect``
     elsewhere. A simulator keeps its clock in ``run_dir``/simulator.clock, so that it goes on
-    across the supervisor's restarts (a ``--set clock_file=...`` of the caller's wins)."""
+    across the supervisor's restarts (a ``--set clock_file=...`` of the caller's wins). With
+    ``namespaces`` (robots, see :func:`robots_served`) each process of detector, locator and
+    follower serves every robot under its namespace (``--namespaces``)."""
     python = sys.executable
     Keys(namespace)  # raises ValueError for a namespace Zenoh cannot route
     absolute = lambda path: str(Path(path).resolve()) if path else None  # noqa: E731
@@ -214,7 +245,9 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
         argv = [python, "-m", "balltrack", "run", process] if joined else [python, "-m", f"balltrack.services.{process}"]
         for endpoint in connect:
             argv += ["--connect", endpoint]
-        if namespace:
+        if namespaces and set(names) <= set(SERVICES_OF_MANY_ROBOTS):
+            argv += ["--namespaces", ",".join(namespaces)]
+        elif namespace:
             argv += ["--namespace", namespace]
         if secure:
             argv += ["--secure", absolute(secure)]
@@ -237,21 +270,24 @@ def make_specs(services: list[str], overrides: dict[str, list[str]], router: boo
         specs.append(ChildSpec(process, argv, wait_alive=router and process != services[-1],
                                state_files=state_files))
     # (the services themselves, each with its liveliness token, whichever process runs it)
-    info = {"connect": connect, "namespace": namespace,
+    info = {"connect": connect, "namespace": namespace, "namespaces": list(namespaces),
             "services": services_of(services),
             "zenoh_config": absolute(zenoh_config), "router": bool(router), "secure": absolute(secure)}
     return specs, info
 
 
 # -- the network side: liveliness and stats --------------------------------------------------
-def network_status(info: dict, timeout: float) -> tuple[set[str] | None, dict[str, dict], str | None]:
-    """(alive services or None if unreachable, stats per service, error)."""
+def network_status(info: dict, timeout: float) -> tuple[dict[str, tuple[set[str], dict[str, dict]]] | None,
+                                                       str | None]:
+    """Per namespace (the run's, and each of its robots'): (services alive, stats per service);
+    None and the error when the router is out of reach."""
     try:
         session = open_for(info, timeout)
     except SessionOpenError as error:
-        return None, {}, str(error)
-    alive, stats = service_status(session, info.get("namespace", ""), timeout)
-    return alive, stats, close_session(session)
+        return None, str(error)
+    namespaces = dict.fromkeys([info.get("namespace", ""), *(info.get("namespaces") or [])])
+    found = {namespace: service_status(session, namespace, timeout) for namespace in namespaces}
+    return found, close_session(session)
 
 
 # -- run folders -----------------------------------------------------------------------------
@@ -415,17 +451,24 @@ def collect_status(run_dir: Path, timeout: float, network: bool = True) -> dict:
         child["running"] = bool(child["pid"]) and supervisor["running"] and pid_alive(child["pid"])
     result = {"run_dir": str(run_dir), **status}
     if network and supervisor["running"]:
-        alive, stats, error = network_status(supervisor, timeout)
+        found, error = network_status(supervisor, timeout)
         result["network_error"] = error
+        robots = supervisor.get("namespaces") or []
         for name, child in status["children"].items():
-            services = [service for service in process_services(name) if service in SERVICES]
-            if len(services) == 1:
-                child["alive"] = None if alive is None else name in alive
-                child["stats"] = stats.get(name)
-            elif services:  # (services joined in one process: alive when all of them are)
-                child["services"] = {service: {"alive": None if alive is None else service in alive,
-                                               "stats": stats.get(service)} for service in services}
-                child["alive"] = None if alive is None else all(service in alive for service in services)
+            # Each service of the process, under each robot it serves (robot1/detector...).
+            entries = {}
+            for service in (service for service in process_services(name) if service in SERVICES):
+                serves_robots = bool(robots) and service in SERVICES_OF_MANY_ROBOTS
+                for namespace in robots if serves_robots else [supervisor.get("namespace", "")]:
+                    alive, stats = (found or {}).get(namespace, (set(), {}))
+                    entries[f"{namespace}/{service}" if serves_robots else service] = {
+                        "alive": None if found is None else service in alive, "stats": stats.get(service)}
+            if len(entries) == 1:
+                (entry,) = entries.values()
+                child["alive"], child["stats"] = entry["alive"], entry["stats"]
+            elif entries:  # (services joined in one process, or robots: alive when all are)
+                child["services"] = entries
+                child["alive"] = None if found is None else all(entry["alive"] for entry in entries.values())
     return result
 
 
@@ -455,6 +498,10 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
                             "else $BALLTRACK_CONNECT or tcp/127.0.0.1:7447)")
     start.add_argument("--namespace", default=os.environ.get("BALLTRACK_NAMESPACE", ""), metavar="NS",
                        help="key prefix for every service, e.g. robot1")
+    start.add_argument("--namespaces", metavar="NS,NS,...",
+                       help="robots that each process of detector, locator and follower serves, each "
+                            "under its namespace (robot1,robot2; a simulator holding them: --set "
+                            "simulator.robots=2); not with --namespace or --secure")
     start.add_argument("--zenoh-config", metavar="FILE",
                        help="a Zenoh json5 config for the services (e.g. deploy/zenoh/client.json5)")
     start.add_argument("--secure", metavar="DIR",

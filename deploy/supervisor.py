@@ -134,42 +134,62 @@ def open_for(info: dict, timeout: float):
     return open_session(info.get("connect") or None, info.get("zenoh_config"), open_timeout=timeout)
 
 
+def robot_tokens(info: dict, services: list[str]) -> set[tuple[str, str]]:
+    """The liveliness tokens ``(namespace, service)`` that ``services`` declare when alive:
+    under each of ``info``'s robots (``namespaces``, one process serving several) for the
+    services that serve several, else under its ``namespace``."""
+    from balltrack.common.keys import SERVICES_OF_MANY_ROBOTS, validate_namespace
+
+    namespace = validate_namespace(info.get("namespace", ""))
+    robots = info.get("namespaces") or []
+    return {(robot, service) for service in services for robot in
+            (robots if robots and service in SERVICES_OF_MANY_ROBOTS else [namespace])}
+
+
 def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.Event | None = None,
                failed=lambda: False) -> set[str]:
-    """Wait until every service in ``services`` has its ``alive/<service>`` token, or
-    ``stop`` is set, or ``failed()`` is true; the services still missing."""
+    """Wait until every service in ``services`` has its ``alive/<service>`` token (under each
+    robot's namespace, for one serving several: :func:`robot_tokens`), or ``stop`` is set, or
+    ``failed()`` is true; the services still missing (``robot1/detector`` for one robot's)."""
     import zenoh
 
-    from balltrack.common.keys import Keys
+    from balltrack.common.keys import Keys, alive_token
     from balltrack.common.session import SessionOpenError, close_session
 
     deadline = time.monotonic() + timeout
-    keys = Keys(info.get("namespace", ""))
+    needed = robot_tokens(info, services)
+    namespaces = sorted({namespace for namespace, _ in needed})
     try:
         session = open_for(info, timeout)
     except SessionOpenError:
         return set(services)
-    alive: set[str] = set()
+    alive: set[tuple[str, str]] = set()
     changed = threading.Condition()
 
     def on_token(sample):
-        name = keys.strip(str(sample.key_expr)).split("/", 1)[1]
+        token = alive_token(str(sample.key_expr))
+        if token is None:
+            return
         with changed:
-            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
+            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(token)
             changed.notify_all()
 
-    subscriber = session.liveliness().declare_subscriber(keys("alive/*"), on_token, history=True)
+    # (a namespace each: a secure profile's viewer may read only its own robot's keys)
+    subscribers = [session.liveliness().declare_subscriber(Keys(namespace)("alive/*"), on_token, history=True)
+                   for namespace in namespaces]
     try:
         with changed:
-            while not set(services) <= alive and time.monotonic() < deadline:
+            while not needed <= alive and time.monotonic() < deadline:
                 if (stop is not None and stop.is_set()) or failed():
                     break
                 changed.wait(min(0.2, max(0.0, deadline - time.monotonic())))
-            missing = set(services) - alive
+            missing = needed - alive
     finally:
-        subscriber.undeclare()
+        for subscriber in subscribers:
+            subscriber.undeclare()
         close_session(session)  # (a router out of reach already shows as services missing)
-    return missing
+    robots = len(namespaces) > 1
+    return {f"{namespace}/{service}" if robots and namespace else service for namespace, service in missing}
 
 
 def write_json_atomically(path: Path, data: dict) -> None:

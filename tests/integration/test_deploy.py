@@ -172,6 +172,32 @@ def test_status_of_a_run_folder_shows_each_service_of_a_joined_process(tmp_path)
         assert deploy("stop", "--run-dir", str(run_dir)).returncode == 0
 
 
+def test_one_process_serves_each_robot_of_a_simulated_fleet(tmp_path):
+    run_dir = tmp_path / "run"
+    robots = ["robot1", "robot2"]
+    started = deploy("start", "--router", "--listen", f"tcp/127.0.0.1:{free_port()}", "--services",
+                     "detector+locator+follower,simulator", "--namespaces", ",".join(robots),
+                     "--set", "simulator.robots=2", "--set", "simulator.scenario=fleet",
+                     "--set", "simulator.width=160", "--set", "simulator.height=120",
+                     "--run-dir", str(run_dir), "--wait", "60")
+    assert started.returncode == 0, started.stdout + started.stderr
+    try:
+        def each_robot_served() -> dict | None:
+            shown = status_of(run_dir)
+            assert shown.returncode == 0, shown.stdout + shown.stderr
+            children = json.loads(shown.stdout)["children"]
+            detectors = [children["detector+locator+follower"]["services"][f"{robot}/detector"] for robot in robots]
+            return children if all((entry["stats"] or {}).get("received", 0) > 0 for entry in detectors) else None
+
+        children = wait_until(each_robot_served, 90, "each robot's detector receiving its frames")
+        joined = children["detector+locator+follower"]
+        assert joined["alive"] is True and children["simulator"]["alive"] is True
+        assert {name: entry["alive"] for name, entry in joined["services"].items()} == {
+            f"{robot}/{service}": True for robot in robots for service in SERVICES}
+    finally:
+        assert deploy("stop", "--run-dir", str(run_dir)).returncode == 0
+
+
 def test_start_refuses_a_router_port_that_another_router_holds(router, tmp_path):
     # (the services would join that router, ours failing to listen and restarted for ever)
     listen = f"tcp/127.0.0.1:{router.port}"

@@ -3,7 +3,7 @@
 import pytest
 
 from balltrack.deploy.cli import LaunchError, build_parser, build_specs, endpoint_port, local_endpoint
-from balltrack.deploy.supervisor import describe_exit
+from balltrack.deploy.supervisor import describe_exit, robot_tokens
 
 
 def specs_for(*arguments):
@@ -217,3 +217,36 @@ def test_a_robots_services_start_with_the_robots_credentials_copied_to_it(tmp_pa
     assert info["zenoh_config"] == str((on_robot / "robots" / "robot1" / "viewer" / "client.json5").resolve())
     with pytest.raises(LaunchError, match="no .*robots/robot2/simulator/client.json5 nor"):
         specs_for("--router", "--secure", str(on_robot), "--namespace", "robot2", "--services", "simulator")
+
+
+def test_namespaces_go_to_the_processes_that_serve_several_robots():
+    specs, info = specs_for("--router", "--listen", "tcp/127.0.0.1:7500", "--services",
+                            "detector+locator+follower,simulator", "--namespaces", "robot1,robot2",
+                            "--set", "simulator.robots=2")
+    joined, simulator = specs[1].argv, specs[2].argv
+    assert joined[joined.index("--namespaces") + 1] == "robot1,robot2" and "--namespace" not in joined
+    # (the simulator holds the robots itself, each under its own namespace)
+    assert "--namespaces" not in simulator and "--namespace" not in simulator
+    assert info["namespaces"] == ["robot1", "robot2"] and info["namespace"] == ""
+    assert specs_for("--services", "locator")[1]["namespaces"] == []
+
+
+def test_each_robot_of_a_process_serving_several_must_be_alive():
+    info = {"namespace": "", "namespaces": ["robot1", "robot2"]}
+    assert robot_tokens(info, ["detector", "locator"]) == {("robot1", "detector"), ("robot2", "detector"),
+                                                           ("robot1", "locator"), ("robot2", "locator")}
+    assert robot_tokens(info, ["simulator"]) == {("", "simulator")}
+    assert robot_tokens({"namespace": "robot3"}, ["follower"]) == {("robot3", "follower")}
+
+
+@pytest.mark.parametrize("arguments, reason", [
+    (["--namespaces", "auto"], "--namespaces auto: not under the supervisor"),
+    (["--namespaces", "robot1,robot1"], "'robot1' is listed twice"),
+    (["--namespaces", "robot1", "--namespace", "fleet"], "not with --namespace"),
+    (["--namespaces", "robot1", "--secure", "secure"], "not with --secure"),
+    (["--namespaces", "robot1", "--services", "detector,camera"], "camera serves one robot per process"),
+    (["--namespaces", "robot1", "--services", "detector+simulator"], "detector+simulator serves one robot"),
+])
+def test_namespaces_that_cannot_be_served_are_refused(arguments, reason):
+    with pytest.raises(LaunchError, match=reason.replace("+", r"\+")):
+        specs_for(*arguments)
