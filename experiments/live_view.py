@@ -210,11 +210,11 @@ def watch(renderer: str, url: str, session, frames: FrameWatcher, viewer, change
             requested = time.monotonic()
             set_light(light)
             shown = watcher.wait_for(condition, CHANGE_WAIT, requested)
-            if frames.seen_at is not None:
-                measured["in_frames"].append(frames.seen_at - requested)
+            seen_at = frames.seen_at
+            in_frames = None if seen_at is None else seen_at - requested
             print(f"[{NAME}] {renderer}: change {index + 1}/{changes} ({'dark' if light is DARK else 'lit'}): "
                   + ("not seen" if shown is None else f"{shown:.2f} s")
-                  + ("" if frames.seen_at is None else f" (in image_out after {frames.seen_at - requested:.2f} s)"),
+                  + ("" if in_frames is None else f" (in image_out after {in_frames:.2f} s)"),
                   file=sys.stderr, flush=True)
             if shown is None:
                 measured["missed"] += 1
@@ -222,6 +222,7 @@ def watch(renderer: str, url: str, session, frames: FrameWatcher, viewer, change
                 # measure the same backlog)
                 break
             measured["seconds"].append(shown)
+            measured["in_frames"].append(in_frames)  # (None: this program's subscriber missed it)
         end = costs()
         measured["viewer_cpu"] = 100 * (end[1] - start[1]) / (end[0] - start[0])
         measured["browser_cpu"] = 100 * (end[2] - start[2]) / (end[0] - start[0])
@@ -276,13 +277,16 @@ def run(options) -> "ExperimentResult":
     rows = []
     for renderer, figures in measured.items():
         seconds = figures["seconds"]
+        in_frames = [value for value in figures["in_frames"] if value is not None]
         p50, p99 = quantile(seconds, 0.5), quantile(seconds, 0.99)
         for name, value in (("webgl", figures["webgl"]), ("first_picture_s", figures["first_picture"]),
                             ("changes", changes), ("seen", len(seconds)), ("not_seen", figures["missed"]),
                             ("p50_s", p50), ("p99_s", p99), ("max_s", max(seconds) if seconds else None),
                             ("each_s", [round(value, 3) for value in seconds]),
-                            ("image_out_p50_s", quantile(figures["in_frames"], 0.5)),
-                            ("image_out_p99_s", quantile(figures["in_frames"], 0.99)),
+                            ("image_out_each_s", [None if value is None else round(value, 3)
+                                                  for value in figures["in_frames"]]),
+                            ("image_out_p50_s", quantile(in_frames, 0.5)),
+                            ("image_out_p99_s", quantile(in_frames, 0.99)),
                             ("page_frames_per_s", figures["frames_per_s"]),
                             ("viewer_cpu_percent", figures["viewer_cpu"]),
                             ("browser_cpu_percent", figures["browser_cpu"])):
@@ -301,7 +305,7 @@ def run(options) -> "ExperimentResult":
         rows.append([renderer + (" (goal)" if renderer == GOAL_RENDERER else ""), figures["webgl"] or "-",
                      text(figures["first_picture"]), f"{len(seconds)} / {changes}", text(p50), text(p99),
                      text(max(seconds) if seconds else None),
-                     f"{text(quantile(figures['in_frames'], 0.5))} / {text(quantile(figures['in_frames'], 0.99))}",
+                     f"{text(quantile(in_frames, 0.5))} / {text(quantile(in_frames, 0.99))}",
                      f"{figures['frames_per_s']:.1f}", f"{figures['viewer_cpu']:.0f} %", f"{figures['browser_cpu']:.0f} %"])
     result.figure("viewer_summary", summary)
     result.table(["renderer", "WebGL on", "first picture", "changes seen", "p50", "p99", "max",
