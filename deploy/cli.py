@@ -29,7 +29,7 @@ from balltrack.common.config import ConfigError, settings_by_service
 from balltrack.common.keys import (CORE_SERVICES, SERVICES, SERVICES_OF_MANY_ROBOTS, Keys, namespace_list,
                                    process_services, services_of)
 from balltrack.common.network import port_taken
-from balltrack.common.session import (DEFAULT_PORT, SessionOpenError, client_config, close_session,
+from balltrack.common.session import (DEFAULT_PORT, ROBOTS_FOLDER, SessionOpenError, client_config, close_session,
                                       config_endpoints, default_endpoints, load_config_file,
                                       router_config, secure_client_path, secure_router_path)
 from balltrack.common.status import service_status
@@ -129,21 +129,25 @@ def robots_served(args, services: list[str]) -> list[str]:
                           "name the robots (robot1,robot2), or run `balltrack run ... --namespaces auto`")
     if args.namespace:
         raise LaunchError("--namespaces: not with --namespace (one robot's namespace goes in either)")
-    if args.secure:
-        raise LaunchError("--namespaces: not with --secure (each robot's services hold that robot's own "
-                          "credentials: a process per robot, with --namespace)")
     single = [name for process in services for name in process_services(process)
-              if name not in SERVICES_OF_MANY_ROBOTS and name != "simulator"]
+              if name not in SERVICES_OF_MANY_ROBOTS and (name != "simulator" or args.secure)]
     mixed = [process for process in services if "simulator" in process_services(process)
              and len(process_services(process)) > 1]
     if single or mixed:
         raise LaunchError(f"--namespaces: {', '.join(single + mixed)} serves one robot per process; with "
-                          f"--namespaces: {', '.join(SERVICES_OF_MANY_ROBOTS)}, and a simulator of its own "
-                          "(--set simulator.robots=N)")
+                          f"--namespaces: {', '.join(SERVICES_OF_MANY_ROBOTS)}"
+                          + ("" if args.secure else ", and a simulator of its own (--set simulator.robots=N)"))
     try:
-        return namespace_list(args.namespaces, "--namespaces")
+        robots = namespace_list(args.namespaces, "--namespaces")
     except ValueError as error:
         raise LaunchError(str(error)) from None
+    # (the fleet-wide roles of a fleet's profile are allowed its robots' keys; a profile made
+    # without them would let the services join and then drop every message)
+    unknown = [robot for robot in robots if args.secure and not (Path(args.secure) / ROBOTS_FOLDER / robot).is_dir()]
+    if unknown:
+        raise LaunchError(f"--namespaces: {args.secure} is no profile of robot {unknown[0]} "
+                          f"(balltrack secure init --robots {','.join(robots)})")
+    return robots
 
 
 def secure_listen(directory: str, host: str | None) -> list[str]:
@@ -501,7 +505,8 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     start.add_argument("--namespaces", metavar="NS,NS,...",
                        help="robots that each process of detector, locator and follower serves, each "
                             "under its namespace (robot1,robot2; a simulator holding them: --set "
-                            "simulator.robots=2); not with --namespace or --secure")
+                            "simulator.robots=2); with --secure, a fleet's profile (secure init --robots) "
+                            "and no simulator; not with --namespace")
     start.add_argument("--zenoh-config", metavar="FILE",
                        help="a Zenoh json5 config for the services (e.g. deploy/zenoh/client.json5)")
     start.add_argument("--secure", metavar="DIR",

@@ -25,7 +25,7 @@ from balltrack.common.session import load_config_file, open_session, secure_clie
 from balltrack.common.status import liveliness_keys, services_by_namespace
 from balltrack.deploy.secure import init_profile, permissions
 from balltrack.services.simulator.control import send_command
-from tests.harness import (Collector, Liveliness, Process, process_environment, put_until, start_service,
+from tests.harness import (REPO, Collector, Liveliness, Process, process_environment, put_until, start_service,
                            wait_matched, wait_until)
 
 SMALL = ("--set", "width=160", "--set", "height=120")
@@ -545,3 +545,26 @@ def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(profile
     assert elsewhere.popen.wait(60) == 2
     assert (f"--secure: no {on_robot}/robots/robot2/follower/client.json5 nor {on_robot}/follower/client.json5"
             in elsewhere.output()), elsewhere.output()
+
+
+@FLEET
+def test_one_process_per_service_serves_every_robot_under_the_supervisor(profile, secure_router, tmp_path):
+    """The server's side of a secure fleet: ``deploy start --namespaces`` with the fleet-wide
+    roles (a robot's frame source runs on the robot, with its own credentials)."""
+    run_dir = tmp_path / "run"
+    command = [sys.executable, "-m", "balltrack.deploy", "start", "--secure", str(profile), "--connect",
+               f"tls/localhost:{secure_router}", "--services", "locator,follower", "--namespaces", ",".join(ROBOTS),
+               "--run-dir", str(run_dir), "--wait", "60"]
+    started = subprocess.run(command, cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=120)
+    try:
+        assert started.returncode == 0, started.stdout + started.stderr
+        shown = subprocess.run([sys.executable, "-m", "balltrack", "status", "--run-dir", str(run_dir), "--json"],
+                               cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=60)
+        children = json.loads(shown.stdout)["children"]
+        assert {name: {label: entry["alive"] for label, entry in child["services"].items()}
+                for name, child in children.items()} == {
+            service: {f"{robot}/{service}": True for robot in ROBOTS} for service in ("locator", "follower")}
+    finally:
+        stopped = subprocess.run([sys.executable, "-m", "balltrack.deploy", "stop", "--run-dir", str(run_dir)],
+                                 cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=120)
+        assert stopped.returncode == 0, stopped.stdout + stopped.stderr
