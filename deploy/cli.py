@@ -130,13 +130,13 @@ def robots_served(args, services: list[str]) -> list[str]:
     if args.namespace:
         raise LaunchError("--namespaces: not with --namespace (one robot's namespace goes in either)")
     single = [name for process in services for name in process_services(process)
-              if name not in SERVICES_OF_MANY_ROBOTS and (name != "simulator" or args.secure)]
+              if name not in SERVICES_OF_MANY_ROBOTS and name != "simulator"]
     mixed = [process for process in services if "simulator" in process_services(process)
              and len(process_services(process)) > 1]
     if single or mixed:
         raise LaunchError(f"--namespaces: {', '.join(single + mixed)} serves one robot per process; with "
-                          f"--namespaces: {', '.join(SERVICES_OF_MANY_ROBOTS)}"
-                          + ("" if args.secure else ", and a simulator of its own (--set simulator.robots=N)"))
+                          f"--namespaces: {', '.join(SERVICES_OF_MANY_ROBOTS)}, and a simulator of its own "
+                          "(--set simulator.robots=N)")
     try:
         robots = namespace_list(args.namespaces, "--namespaces")
     except ValueError as error:
@@ -505,8 +505,8 @@ def build_parser(prog: str = "python -m balltrack.deploy") -> ArgumentParser:
     start.add_argument("--namespaces", metavar="NS,NS,...",
                        help="robots that each process of detector, locator and follower serves, each "
                             "under its namespace (robot1,robot2; a simulator holding them: --set "
-                            "simulator.robots=2); with --secure, a fleet's profile (secure init --robots) "
-                            "and no simulator; not with --namespace")
+                            "simulator.robots=2); with --secure, a fleet's profile (secure init --robots); "
+                            "not with --namespace")
     start.add_argument("--zenoh-config", metavar="FILE",
                        help="a Zenoh json5 config for the services (e.g. deploy/zenoh/client.json5)")
     start.add_argument("--secure", metavar="DIR",

@@ -22,9 +22,10 @@ A fleet (``--robots robot1,robot2``): each robot's namespace is its name, and ea
 credentials of its own for every service role and a viewer (:data:`ROBOT_ROLES`), subject
 ``<role>@<robot>``, allowed the role's keys under ``<robot>/`` only (no admin space): robot1's
 follower cannot put ``robot2/cmd_vel`` nor its detector read robot2's frames. The fleet-wide
-roles (:data:`FLEET_ROLES`: viewer, operator, and the services one process may run for several
-robots) get the same rules for every robot's namespace, and the watchers every robot's
-liveliness tokens (``**/alive/*``).
+roles (:data:`FLEET_ROLES`: viewer, operator, the services one process may run for several
+robots, and a simulator holding several robots, also allowed its own keys outside them) get the
+same rules for every robot's namespace, and the watchers every robot's liveliness tokens
+(``**/alive/*``).
 
 Every process is a Zenoh client of a router: peers would mesh directly, around the routers'
 access control. What each role may do is :data:`ROLES` plus the key table
@@ -124,10 +125,12 @@ ROLES: dict[str, Role] = {
 
 
 # In a fleet's profile (--robots): the roles that see the whole fleet (a person watching or
-# driving, a process serving several robots: `balltrack run locator --namespaces ...`), and the
-# roles each robot has of its own: its services, and a viewer of it alone (`deploy start` on the
-# robot watches its services with it). A frame source runs per robot: no fleet-wide one.
-FLEET_ROLES = tuple(role for role in ROLES if role in SERVICES_OF_MANY_ROBOTS or role not in SERVICES)
+# driving, a process serving several robots: `balltrack run locator --namespaces ...`, a
+# simulator holding them in one world: `--set robots=N`), and the roles each robot has of its
+# own: its services, and a viewer of it alone (`deploy start` on the robot watches its services
+# with it). A camera or bridge is one robot's: no fleet-wide one.
+FLEET_ROLES = tuple(role for role in ROLES if role in SERVICES_OF_MANY_ROBOTS or role not in SERVICES
+                    or role == "simulator")
 ROBOT_ROLES = tuple(role for role in ROLES if role in SERVICES or role == "viewer")
 
 
@@ -213,11 +216,12 @@ def access_control(namespace: str = "", hosts: list[str] = (), robots: list[str]
         # robots by them, and only a robot's own roles may declare one, under its namespace.
         fleet_watch = bool(robots and not identity.robot)
 
-        def add(kind: str, messages: list[str], flows: list[str], key_list, namespaced: bool = True) -> None:
+        def add(kind: str, messages: list[str], flows: list[str], key_list, namespaced: bool = True,
+                within: list[Keys] = spaces) -> None:
             # The admin space has no namespace: it shows the whole router (every robot's keys),
             # so a robot's own roles get none of it.
             names = [keys(key) if namespaced and not key.startswith("@/") else key
-                     for keys in spaces for key in key_list if not (identity.robot and key.startswith("@/"))]
+                     for keys in within for key in key_list if not (identity.robot and key.startswith("@/"))]
             if names:
                 role_rules.append(_rule(f"{identity.name} {kind}", messages, flows, list(dict.fromkeys(names))))
 
@@ -239,6 +243,17 @@ def access_control(namespace: str = "", hosts: list[str] = (), robots: list[str]
         watches = [f"**/{alive_key('*')}"] if fleet_watch and granted.watches else granted.watches
         add("watch", ["declare_liveliness_subscriber", "liveliness_query"], ["ingress"], watches, not fleet_watch)
         add("watch tokens", ["liveliness_token"], ["egress"], watches, not fleet_watch)
+        if fleet_watch and identity.role == "simulator":
+            # A simulator holding the robots runs outside their namespaces: its own stats,
+            # config and token there (each robot's keys are under the robot's, above).
+            own = [Keys(namespace)]
+            add("own put", ["put"], ["ingress"], [key for key in granted.puts if key.startswith("simulator/")],
+                within=own)
+            add("own answer", ["declare_queryable", "reply"], ["ingress"],
+                [key for key in granted.answers if key.startswith("simulator/")], within=own)
+            add("own answer queries", ["query"], ["egress"],
+                [key for key in granted.answers if key.startswith("simulator/")], within=own)
+            add("own token", ["liveliness_token"], ["ingress"], granted.tokens, within=own)
         rules += role_rules
         subjects.append({"id": identity.name, "cert_common_names": [client_common_name(identity.name)],
                          "usernames": [identity.name]})

@@ -549,12 +549,13 @@ def test_a_robots_service_joins_with_the_robots_credentials_copied_to_it(profile
 
 @FLEET
 def test_one_process_per_service_serves_every_robot_under_the_supervisor(profile, secure_router, tmp_path):
-    """The server's side of a secure fleet: ``deploy start --namespaces`` with the fleet-wide
-    roles (a robot's frame source runs on the robot, with its own credentials)."""
+    """A secure fleet under the supervisor: ``deploy start --namespaces`` with the fleet-wide
+    roles, a simulator holding both robots among them."""
     run_dir = tmp_path / "run"
     command = [sys.executable, "-m", "balltrack.deploy", "start", "--secure", str(profile), "--connect",
-               f"tls/localhost:{secure_router}", "--services", "locator,follower", "--namespaces", ",".join(ROBOTS),
-               "--run-dir", str(run_dir), "--wait", "60"]
+               f"tls/localhost:{secure_router}", "--services", "locator,follower,simulator",
+               "--namespaces", ",".join(ROBOTS), "--set", "simulator.robots=2", "--set", "simulator.width=160",
+               "--set", "simulator.height=120", "--run-dir", str(run_dir), "--wait", "60"]
     started = subprocess.run(command, cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=120)
     try:
         assert started.returncode == 0, started.stdout + started.stderr
@@ -562,9 +563,27 @@ def test_one_process_per_service_serves_every_robot_under_the_supervisor(profile
                                cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=60)
         children = json.loads(shown.stdout)["children"]
         assert {name: {label: entry["alive"] for label, entry in child["services"].items()}
-                for name, child in children.items()} == {
+                for name, child in children.items() if name != "simulator"} == {
             service: {f"{robot}/{service}": True for robot in ROBOTS} for service in ("locator", "follower")}
+        assert children["simulator"]["alive"] is True
     finally:
         stopped = subprocess.run([sys.executable, "-m", "balltrack.deploy", "stop", "--run-dir", str(run_dir)],
                                  cwd=REPO, env=process_environment(), capture_output=True, text=True, timeout=120)
         assert stopped.returncode == 0, stopped.stdout + stopped.stderr
+
+
+@FLEET
+def test_a_simulator_holding_the_fleet_serves_each_robots_own_services(profile, secure_router, as_role, tmp_path):
+    simulator = start_service("simulator", f"tls/localhost:{secure_router}", tmp_path, "--secure", str(profile),
+                              *SMALL, "--set", "robots=2", "--set", "pacing=realtime")
+    try:
+        # Each robot's own detector gets that robot's frames (and, by the rules, no other's).
+        for robot in ROBOTS:
+            Collector(as_role("detector", robot), f"{robot}/camera/image_raw", "Image").wait_count(2, 40)
+        # A person drives one robot's part of the world through that robot's sim/control.
+        reply = send_command(as_role("operator"), {"op": "place_robot", "x": 0.5, "y": 0.0, "yaw": 0.0},
+                             namespace="robot2")
+        assert reply["ok"], reply
+        Liveliness(as_role("viewer")).wait("simulator", timeout=20)  # its own token, outside the robots'
+    finally:
+        assert simulator.stop() == 0, simulator.output()

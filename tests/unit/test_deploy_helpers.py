@@ -244,8 +244,6 @@ def test_each_robot_of_a_process_serving_several_must_be_alive():
     (["--namespaces", "robot1,robot1"], "'robot1' is listed twice"),
     (["--namespaces", "robot1", "--namespace", "fleet"], "not with --namespace"),
     (["--namespaces", "robot1", "--secure", "no-profile", "--services", "locator"], "no-profile is no profile of robot robot1"),
-    (["--namespaces", "robot1", "--secure", "no-profile", "--services", "locator,simulator"],
-     "simulator serves one robot per process"),
     (["--namespaces", "robot1", "--services", "detector,camera"], "camera serves one robot per process"),
     (["--namespaces", "robot1", "--services", "detector+simulator"], "detector+simulator serves one robot"),
 ])

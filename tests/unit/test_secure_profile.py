@@ -238,8 +238,8 @@ def test_a_fleets_robot_roles_reach_only_their_own_namespace():
     subjects = {subject["id"]: subject for subject in acl["subjects"]}
     robot_roles = [f"{role}@{robot}" for robot in ROBOTS for role in ROBOT_ROLES]
     assert list(subjects) == [*FLEET_ROLES, *robot_roles]
-    assert set(FLEET_ROLES) == {"detector", "locator", "follower", "viewer", "operator"}
-    # (no fleet-wide frame source: one runs per robot; a robot's viewer watches it alone)
+    assert set(FLEET_ROLES) == {"detector", "locator", "follower", "simulator", "viewer", "operator"}
+    # (no fleet-wide camera or bridge: one runs per robot; a robot's viewer watches it alone)
     assert set(ROBOT_ROLES) == {*SERVICES, "viewer"}
     assert subjects["follower@robot1"] == {"id": "follower@robot1", "cert_common_names": ["balltrack follower@robot1"],
                                            "usernames": ["follower@robot1"]}
@@ -252,13 +252,18 @@ def test_a_fleets_robot_roles_reach_only_their_own_namespace():
             robot = name.split("@")[1]
             assert all(key.startswith(f"{robot}/") for key in keys), (name, keys)
         else:  # fleet-wide: every robot's keys, the admin space, every robot's tokens
-            assert all(key.startswith(("robot1/", "robot2/", "@/", "**/alive/")) for key in keys), (name, keys)
+            own = ["simulator/stats", "simulator/config", "alive/simulator"] if name == "simulator" else []
+            assert all(key.startswith(("robot1/", "robot2/", "@/", "**/alive/")) or key in own for key in keys), (name, keys)
             assert any(key.startswith("robot1/") for key in keys) and any(key.startswith("robot2/") for key in keys)
     assert rules["follower@robot1 put"]["key_exprs"] == ["robot1/cmd_vel", "robot1/follower/stats"]
     assert rules["detector@robot1 subscribe"]["key_exprs"] == ["robot1/camera/image_raw"]
     assert rules["simulator@robot2 answer"]["key_exprs"] == ["robot2/camera/camera_info", "robot2/sim/control",
                                                             "robot2/simulator/config"]
     assert rules["simulator@robot2 watch"]["key_exprs"] == ["robot2/alive/*"]
+    # A simulator holding both robots: each robot's keys, and outside them only its own.
+    assert rules["simulator put"]["key_exprs"][:2] == ["robot1/camera/image_raw", "robot1/camera/camera_info"]
+    assert [rules[f"simulator own {kind}"]["key_exprs"] for kind in ("put", "answer", "token")] == [
+        ["simulator/stats"], ["simulator/config"], ["alive/simulator"]]
     assert rules["operator put"]["key_exprs"] == ["robot1/cmd_vel", "robot2/cmd_vel"]
     assert rules["viewer subscribe"]["key_exprs"] == ["robot1/**", "robot2/**"]
     assert rules["viewer watch"]["key_exprs"] == rules["operator watch tokens"]["key_exprs"] == ["**/alive/*"]
@@ -278,7 +283,7 @@ def test_a_fleet_profile_writes_each_robots_credentials(tmp_path):
     init_profile(directory, ["a"], robots=ROBOTS)
     users = dict(line.split(":", 1) for line in (directory / "a" / "users.txt").read_text().splitlines())
     assert set(users) == {*FLEET_ROLES, *(f"{role}@{robot}" for robot in ROBOTS for role in ROBOT_ROLES)}
-    assert not (directory / "simulator").exists()
+    assert not (directory / "camera").exists() and (directory / "simulator" / "client.json5").is_file()
     folder = directory / "robots" / "robot1" / "follower"
     assert common_name(certificate(folder / "follower.pem")) == "balltrack follower@robot1"
     assert users["follower@robot1"] == (folder / "password").read_text().strip() != users["follower"]
