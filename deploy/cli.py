@@ -35,8 +35,8 @@ from balltrack.common.session import (DEFAULT_PORT, ROBOTS_FOLDER, SessionOpenEr
 from balltrack.common.status import service_status
 from balltrack.common.waiting import poll_until
 from balltrack.deploy.supervisor import (ChildSpec, SupervisorSettings, child_environment, describe_exit,
-                                         die_with_parent, open_for, pid_alive, save_launch, supervise,
-                                         wait_alive)
+                                         die_with_parent, open_for, pid_alive, save_launch, serving_namespaces,
+                                         supervise, wait_alive)
 
 DEFAULT_RUN_DIR = "runs/default"
 DEFAULT_LISTEN = f"tcp/0.0.0.0:{DEFAULT_PORT}"
@@ -462,10 +462,9 @@ def collect_status(run_dir: Path, timeout: float, network: bool = True) -> dict:
             # Each service of the process, under each robot it serves (robot1/detector...).
             entries = {}
             for service in (service for service in process_services(name) if service in SERVICES):
-                serves_robots = bool(robots) and service in SERVICES_OF_MANY_ROBOTS
-                for namespace in robots if serves_robots else [supervisor.get("namespace", "")]:
+                for namespace in serving_namespaces(supervisor, service):
                     alive, stats = (found or {}).get(namespace, (set(), {}))
-                    entries[f"{namespace}/{service}" if serves_robots else service] = {
+                    entries[f"{namespace}/{service}" if namespace in robots else service] = {
                         "alive": None if found is None else service in alive, "stats": stats.get(service)}
             if len(entries) == 1:
                 (entry,) = entries.values()

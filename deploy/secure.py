@@ -246,13 +246,11 @@ def access_control(namespace: str = "", hosts: list[str] = (), robots: list[str]
         if fleet_watch and identity.role == "simulator":
             # A simulator holding the robots runs outside their namespaces: its own stats,
             # config and token there (each robot's keys are under the robot's, above).
-            own = [Keys(namespace)]
-            add("own put", ["put"], ["ingress"], [key for key in granted.puts if key.startswith("simulator/")],
-                within=own)
-            add("own answer", ["declare_queryable", "reply"], ["ingress"],
-                [key for key in granted.answers if key.startswith("simulator/")], within=own)
-            add("own answer queries", ["query"], ["egress"],
-                [key for key in granted.answers if key.startswith("simulator/")], within=own)
+            own, prefix = [Keys(namespace)], f"{identity.role}/"
+            answers = [key for key in granted.answers if key.startswith(prefix)]
+            add("own put", ["put"], ["ingress"], [key for key in granted.puts if key.startswith(prefix)], within=own)
+            add("own answer", ["declare_queryable", "reply"], ["ingress"], answers, within=own)
+            add("own answer queries", ["query"], ["egress"], answers, within=own)
             add("own token", ["liveliness_token"], ["ingress"], granted.tokens, within=own)
         rules += role_rules
         subjects.append({"id": identity.name, "cert_common_names": [client_common_name(identity.name)],

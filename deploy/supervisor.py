@@ -134,16 +134,19 @@ def open_for(info: dict, timeout: float):
     return open_session(info.get("connect") or None, info.get("zenoh_config"), open_timeout=timeout)
 
 
-def robot_tokens(info: dict, services: list[str]) -> set[tuple[str, str]]:
-    """The liveliness tokens ``(namespace, service)`` that ``services`` declare when alive:
-    under each of ``info``'s robots (``namespaces``, one process serving several) for the
-    services that serve several, else under its ``namespace``."""
+def serving_namespaces(info: dict, service: str) -> list[str]:
+    """Where ``service`` of a run (``info`` of launch.json) is: under each of its robots
+    (``namespaces``) when it serves several, else under the run's ``namespace``."""
     from balltrack.common.keys import SERVICES_OF_MANY_ROBOTS, validate_namespace
 
-    namespace = validate_namespace(info.get("namespace", ""))
     robots = info.get("namespaces") or []
-    return {(robot, service) for service in services for robot in
-            (robots if robots and service in SERVICES_OF_MANY_ROBOTS else [namespace])}
+    return robots if robots and service in SERVICES_OF_MANY_ROBOTS else [validate_namespace(info.get("namespace", ""))]
+
+
+def robot_tokens(info: dict, services: list[str]) -> set[tuple[str, str]]:
+    """The liveliness tokens ``(namespace, service)`` that ``services`` declare when alive
+    (:func:`serving_namespaces`)."""
+    return {(namespace, service) for service in services for namespace in serving_namespaces(info, service)}
 
 
 def wait_alive(info: dict, services: list[str], timeout: float, stop: threading.Event | None = None,

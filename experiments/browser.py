@@ -150,9 +150,9 @@ class Chromium:
         """Call ``on_frame(picture, received_at)`` with each frame the page draws from now on
         (BGR, shrunk to ``max_width``; ``received_at`` on ``time.monotonic()``), until
         :meth:`stop_screencast`. Each frame is acknowledged once received, which lets the
-        browser send the next. A frame comes 0-20 ms after it was drawn (its copy, shrinking and
-        JPEG); the browser's own time of a frame is the start of drawing it, earlier by as long
-        as a page takes to draw (0.3-0.7 s for Rerun's in software), so it is not what is used."""
+        browser send the next. A frame comes a little after it was drawn (its copy, shrinking and
+        JPEG). The time the browser gives a frame is not used: it is when drawing it began,
+        earlier by as long as the page takes to draw one, long for a page drawn in software."""
         self._on_frame = on_frame
         replies = []
 

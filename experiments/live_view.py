@@ -278,19 +278,17 @@ def run(options) -> "ExperimentResult":
     for renderer, figures in measured.items():
         seconds = figures["seconds"]
         in_frames = [value for value in figures["in_frames"] if value is not None]
-        p50, p99 = quantile(seconds, 0.5), quantile(seconds, 0.99)
-        for name, value in (("webgl", figures["webgl"]), ("first_picture_s", figures["first_picture"]),
-                            ("changes", changes), ("seen", len(seconds)), ("not_seen", figures["missed"]),
-                            ("p50_s", p50), ("p99_s", p99), ("max_s", max(seconds) if seconds else None),
-                            ("each_s", [round(value, 3) for value in seconds]),
-                            ("image_out_each_s", [None if value is None else round(value, 3)
-                                                  for value in figures["in_frames"]]),
-                            ("image_out_p50_s", quantile(in_frames, 0.5)),
-                            ("image_out_p99_s", quantile(in_frames, 0.99)),
-                            ("page_frames_per_s", figures["frames_per_s"]),
-                            ("viewer_cpu_percent", figures["viewer_cpu"]),
-                            ("browser_cpu_percent", figures["browser_cpu"])):
+        named = {"webgl": figures["webgl"], "first_picture_s": figures["first_picture"], "changes": changes,
+                 "seen": len(seconds), "not_seen": figures["missed"], "p50_s": quantile(seconds, 0.5),
+                 "p99_s": quantile(seconds, 0.99), "max_s": max(seconds) if seconds else None,
+                 "each_s": [round(value, 3) for value in seconds],
+                 "image_out_each_s": [None if value is None else round(value, 3) for value in figures["in_frames"]],
+                 "image_out_p50_s": quantile(in_frames, 0.5), "image_out_p99_s": quantile(in_frames, 0.99),
+                 "page_frames_per_s": figures["frames_per_s"], "viewer_cpu_percent": figures["viewer_cpu"],
+                 "browser_cpu_percent": figures["browser_cpu"]}
+        for name, value in named.items():
             result.figure(f"{renderer}/{name}", value)
+        p50, p99 = named["p50_s"], named["p99_s"]
         if figures["first_picture"] is None:
             achieved = f"the page showed no camera picture in {PAGE_WAIT:g} s"
         else:
@@ -304,8 +302,7 @@ def run(options) -> "ExperimentResult":
                         not figures["missed"] and p50 is not None and p50 <= GOAL_P50_S and p99 <= GOAL_P99_S)
         rows.append([renderer + (" (goal)" if renderer == GOAL_RENDERER else ""), figures["webgl"] or "-",
                      text(figures["first_picture"]), f"{len(seconds)} / {changes}", text(p50), text(p99),
-                     text(max(seconds) if seconds else None),
-                     f"{text(quantile(in_frames, 0.5))} / {text(quantile(in_frames, 0.99))}",
+                     text(named["max_s"]), f"{text(named['image_out_p50_s'])} / {text(named['image_out_p99_s'])}",
                      f"{figures['frames_per_s']:.1f}", f"{figures['viewer_cpu']:.0f} %", f"{figures['browser_cpu']:.0f} %"])
     result.figure("viewer_summary", summary)
     result.table(["renderer", "WebGL on", "first picture", "changes seen", "p50", "p99", "max",
